@@ -1,0 +1,272 @@
+"""The stage: a table, a Franka Panda at its edge and up to eight 4 cm cubes.
+
+Everything is loaded from ``models/`` through Drake's ``PackageMap``: the package
+``cake_drake`` is the repository's ``models/`` folder, and ``pybullet_franka_panda`` is the
+Panda mesh folder that ships inside the ``pybullet`` wheel (installed from PyPI, never
+downloaded at run time; the simulator itself is never imported).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, SceneGraph
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.parsing import (
+    LoadModelDirectives,
+    PackageMap,
+    Parser,
+    ProcessModelDirectives,
+)
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    MultibodyPlant,
+    MultibodyPlantConfig,
+)
+from pydrake.multibody.tree import FixedOffsetFrame, ModelInstanceIndex, PdControllerGains
+from pydrake.systems.framework import DiagramBuilder
+
+from cake_drake import MODELS_DIR
+from cake_drake.errors import InputError
+
+CUBE_SIZE = 0.04  # m, edge of every cube
+#: Cube names the models folder has a coloured cube for, with the colour's name.
+CUBE_COLOURS: dict[str, str] = {
+    "a": "red",
+    "b": "orange",
+    "c": "yellow",
+    "d": "green",
+    "e": "blue",
+    "f": "purple",
+    "g": "cyan",
+    "h": "pink",
+}
+ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
+FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
+#: The grasp frame: between the fingertip pads, z pointing out of the hand.
+X_HAND_GRASP = RigidTransform([0.0, 0.0, 0.1034])
+#: A comfortable arm configuration above the table (hand pointing down).
+Q_HOME = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4])
+SCENE_DIRECTIVES = "package://cake_drake/scene/panda_on_table.dmd.yaml"
+CONTROL_DIRECTIVES = "package://cake_drake/scene/panda_control.dmd.yaml"
+
+
+def _slots() -> tuple[tuple[float, float], ...]:
+    """Eight table slots on an arc of radius 0.55 m in front of the robot, 15 deg apart.
+
+    Ordered centre-out (right of centre first), so that a few towers stand where the
+    arm is most dexterous and the camera sees them all.
+    """
+    angles = [-7.5, 7.5, -22.5, 22.5, -37.5, 37.5, -52.5, 52.5]
+    r = 0.55
+    return tuple(
+        (r * math.cos(math.radians(a)), r * math.sin(math.radians(a))) for a in angles
+    )
+
+
+#: (x, y) of each table slot, in the order towers are assigned to them.
+SLOTS: tuple[tuple[float, float], ...] = _slots()
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """How the world is simulated. The defaults hold a stack of eight cubes at 10 ms steps."""
+
+    time_step: float = 0.01  # s, discrete MultibodyPlant step (SAP)
+    #: SAP's near-rigid threshold: lower values regularise stiff contact less; 0.3-0.5
+    #: keeps a tower from sagging at 10 ms steps, 1.0 (Drake's default) lets it sag ~5 mm.
+    sap_near_rigid_threshold: float = 0.4
+    contact_approximation: str = "sap"  # "lagged" (Drake's default) lets a tower slide apart
+    finger_kp: float = 1000.0  # N/m; with the fingers commanded shut this squeezes ~20 N
+    finger_kd: float = 20.0  # N s/m
+
+
+@dataclass
+class Scene:
+    """Handles to the parts of a built world."""
+
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    arm: ModelInstanceIndex
+    hand: ModelInstanceIndex
+    cubes: dict[str, ModelInstanceIndex] = field(default_factory=dict)
+
+    @property
+    def grasp_frame(self):
+        return self.plant.GetFrameByName("grasp", self.hand)
+
+    def cube_body(self, name: str):
+        return self.plant.GetBodyByName("cube", self.cubes[name])
+
+
+def package_map() -> PackageMap:
+    """Packages the models refer to: ``cake_drake`` and the Panda meshes (offline)."""
+    import pybullet_data  # data only: the folder that holds franka_panda/meshes
+
+    packages = PackageMap.MakeEmpty()
+    packages.Add("cake_drake", str(MODELS_DIR))
+    packages.Add("pybullet_franka_panda", str(Path(pybullet_data.getDataPath()) / "franka_panda"))
+    return packages
+
+
+def make_parser(plant: MultibodyPlant) -> Parser:
+    parser = Parser(plant)
+    parser.package_map().AddMap(package_map())
+    return parser
+
+
+def _load_directives(parser: Parser, url: str) -> None:
+    path = parser.package_map().ResolveUrl(url)
+    ProcessModelDirectives(LoadModelDirectives(path), parser)
+
+
+def _add_grasp_frame(plant: MultibodyPlant, hand: ModelInstanceIndex) -> None:
+    body_frame = plant.GetFrameByName("panda_hand", hand)
+    plant.AddFrame(FixedOffsetFrame("grasp", body_frame, X_HAND_GRASP, hand))
+
+
+def add_world(
+    builder: DiagramBuilder,
+    blocks: Sequence[str],
+    config: WorldConfig = WorldConfig(),
+    arm_gains: tuple[Sequence[float], Sequence[float]] | None = None,
+) -> Scene:
+    """Add the plant (table, Panda, one cube per block name) and SceneGraph to ``builder``.
+
+    The plant is finalized here: the finger actuators are on the plant's implicit PD
+    (stable at large time steps), and so are the arm's when ``arm_gains`` = (kp, kd) per
+    joint is given (the position-control mode); the robot's own geometries never collide
+    with each other.
+    """
+    unknown = [b for b in blocks if b not in CUBE_COLOURS]
+    if unknown:
+        raise InputError(
+            f"block {unknown[0]!r} has no cube model; the world has cubes "
+            f"{', '.join(CUBE_COLOURS)} (at most {len(CUBE_COLOURS)} blocks)"
+        )
+    plant_config = MultibodyPlantConfig(
+        time_step=config.time_step,
+        discrete_contact_approximation=config.contact_approximation,
+        sap_near_rigid_threshold=config.sap_near_rigid_threshold,
+        contact_model="point",
+    )
+    plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+    parser = make_parser(plant)
+    _load_directives(parser, SCENE_DIRECTIVES)
+    arm = plant.GetModelInstanceByName("panda")
+    hand = plant.GetModelInstanceByName("hand")
+    _add_grasp_frame(plant, hand)
+    cubes = {}
+    for name in blocks:
+        (cubes[name],) = parser.AddModels(url=f"package://cake_drake/cubes/cube_{name}.sdf")
+    for joint_name in FINGER_JOINTS:
+        actuator = plant.GetJointActuatorByName(f"{joint_name}_motor", hand)
+        actuator.set_controller_gains(PdControllerGains(p=config.finger_kp, d=config.finger_kd))
+    if arm_gains is not None:
+        for i, (kp, kd) in enumerate(zip(*arm_gains, strict=True), start=1):
+            actuator = plant.GetJointActuatorByName(f"panda_motor{i}", arm)
+            actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+    plant.Finalize()
+    _filter_robot_collisions(plant, scene_graph, arm, hand)
+    _filter_cube_collisions(plant, scene_graph, cubes)
+    return Scene(plant, scene_graph, arm, hand, cubes)
+
+
+def _filter_robot_collisions(plant, scene_graph, arm, hand) -> None:
+    """The robot never collides with itself, and its base sits on the table."""
+    robot = GeometrySet()
+    for instance in (arm, hand):
+        for body_index in plant.GetBodyIndices(instance):
+            robot.Add(plant.GetCollisionGeometriesForBody(plant.get_body(body_index)))
+    base = GeometrySet(
+        plant.GetCollisionGeometriesForBody(plant.GetBodyByName("panda_link0", arm))
+        + plant.GetCollisionGeometriesForBody(plant.GetBodyByName("panda_link1", arm))
+    )
+    table = plant.GetModelInstanceByName("table")
+    table_set = GeometrySet(
+        plant.GetCollisionGeometriesForBody(plant.GetBodyByName("table_top", table))
+    )
+    manager = scene_graph.collision_filter_manager()
+    manager.Apply(CollisionFilterDeclaration().ExcludeWithin(robot))
+    manager.Apply(CollisionFilterDeclaration().ExcludeBetween(base, table_set))
+
+
+def _filter_cube_collisions(plant, scene_graph, cubes) -> None:
+    """Cubes rest on each other and on the table through corner spheres only.
+
+    Box-on-box point contact has a single, jumping contact point and lets a tower slide
+    apart; ball-on-ball contact between two cubes' corners is unstable. So a cube's
+    corner spheres touch only faces (another cube's box, the table, the finger pads touch
+    the box), and boxes never touch boxes.
+    """
+    inspector = scene_graph.model_inspector()
+    faces, corners = GeometrySet(), GeometrySet()
+    for instance in cubes.values():
+        body = plant.GetBodyByName("cube", instance)
+        for gid in plant.GetCollisionGeometriesForBody(body):
+            (corners if "corner" in inspector.GetName(gid) else faces).Add(gid)
+    table = plant.GetBodyByName("table_top", plant.GetModelInstanceByName("table"))
+    table_set = GeometrySet(plant.GetCollisionGeometriesForBody(table))
+    manager = scene_graph.collision_filter_manager()
+    manager.Apply(CollisionFilterDeclaration().ExcludeWithin(corners))
+    manager.Apply(CollisionFilterDeclaration().ExcludeWithin(faces))
+    manager.Apply(CollisionFilterDeclaration().ExcludeBetween(faces, table_set))
+
+
+def make_control_plant(time_step: float = 0.0) -> MultibodyPlant:
+    """The 7-DOF arm (hand welded on, fingers fixed) that ``InverseDynamicsController`` needs."""
+    plant = MultibodyPlant(time_step)
+    parser = make_parser(plant)
+    _load_directives(parser, CONTROL_DIRECTIVES)
+    hand = plant.GetModelInstanceByName("hand")
+    _add_grasp_frame(plant, hand)
+    plant.Finalize()
+    return plant
+
+
+# --- cube placement ------------------------------------------------------------------
+
+
+def layout(towers: Sequence[Sequence[str]]) -> dict[str, RigidTransform]:
+    """World poses ``X_WB`` of every cube for towers given bottom to top, one slot each."""
+    if len(towers) > len(SLOTS):
+        raise InputError(
+            f"{len(towers)} towers need more table slots than the world has ({len(SLOTS)})"
+        )
+    poses = {}
+    for (x, y), tower in zip(SLOTS, towers, strict=False):
+        yaw = math.atan2(y, x)  # cube faces towards the robot
+        for level, name in enumerate(tower):
+            z = CUBE_SIZE / 2 + level * CUBE_SIZE
+            poses[name] = RigidTransform(RollPitchYaw(0, 0, yaw), [x, y, z])
+    return poses
+
+
+def set_cube_poses(scene: Scene, context, poses: Mapping[str, RigidTransform]) -> None:
+    """Place cubes (``context`` is the plant's context)."""
+    for name, X_WB in poses.items():
+        scene.plant.SetFreeBodyPose(context, scene.cube_body(name), X_WB)
+
+
+def set_default_cube_poses(scene: Scene, poses: Mapping[str, RigidTransform]) -> None:
+    """Make ``poses`` the cubes' default poses, so every new context starts there."""
+    for name, X_WB in poses.items():
+        scene.plant.SetDefaultFreeBodyPose(scene.cube_body(name), X_WB)
+
+
+def cube_poses(scene: Scene, context) -> dict[str, RigidTransform]:
+    """Measured world poses of every cube (``context`` is the plant's context)."""
+    return {
+        name: scene.plant.EvalBodyPoseInWorld(context, scene.cube_body(name))
+        for name in scene.cubes
+    }
+
+
+def set_arm_positions(scene: Scene, context, q: Sequence[float], fingers: float = 0.04) -> None:
+    """Set the 7 arm joints and both fingers (opening per finger, m)."""
+    scene.plant.SetPositions(context, scene.arm, np.asarray(q, dtype=float))
+    scene.plant.SetPositions(context, scene.hand, [fingers, fingers])

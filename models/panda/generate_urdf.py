@@ -1,0 +1,187 @@
+"""Write the Panda URDFs in this folder from the published kinematics and the mesh geometry.
+
+Run once by hand (``python models/panda/generate_urdf.py``); the URDFs it writes are committed.
+
+Why generate: the only offline Panda description on PyPI (``pybullet_data/franka_panda``)
+has placeholder inertias (0.1 kg m^2 on every link), zero-mass links, no actuators and a
+few non-datasheet limits. Here we keep its kinematics (Franka's modified-DH values) and
+meshes, and write:
+
+* ``panda_arm.urdf``: links 0-7, datasheet joint limits (position, velocity, effort),
+  one actuator per joint, inertias of the collision mesh as a uniform solid scaled to the
+  link's mass (about its own centre of mass), collision meshes as convex hulls.
+* ``panda_hand.urdf``: hand and two prismatic fingers with actuators; the fingers touch
+  the world only through four small spheres on each fingertip (a finger mesh touches a
+  cube at a single point, so the cube would pivot in the grasp).
+* ``panda_hand_welded.urdf``: the same hand with the fingers fixed, for the 7-DOF
+  control plant that ``InverseDynamicsController`` needs (it rejects unactuated DOFs).
+
+Meshes are referenced as ``package://pybullet_franka_panda/meshes/...``; the world layer
+maps that package to the ``pybullet_data`` wheel's folder at run time (no download).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pybullet_data
+from pydrake.geometry import Mesh
+from pydrake.multibody.tree import CalcSpatialInertia
+
+HERE = Path(__file__).resolve().parent
+MESHES = Path(pybullet_data.getDataPath()) / "franka_panda" / "meshes"
+PKG = "package://pybullet_franka_panda/meshes"
+
+# Link masses (kg) as published with the pybullet_data model.
+MASS = {
+    "link0": 2.9, "link1": 2.7, "link2": 2.73, "link3": 2.04, "link4": 2.08,
+    "link5": 3.0, "link6": 1.3, "link7": 0.2, "hand": 0.81, "finger": 0.1,
+}  # fmt: skip
+
+# Joint origins (parent frame) and datasheet limits: lower, upper (rad), velocity (rad/s),
+# effort (N m). The kinematics are Franka's modified-DH values.
+JOINTS = [
+    # xyz,                  rpy,            lower,   upper,   vel,   effort
+    ((0, 0, 0.333),      (0, 0, 0),         -2.8973, 2.8973, 2.175, 87.0),
+    ((0, 0, 0),          (-np.pi / 2, 0, 0), -1.7628, 1.7628, 2.175, 87.0),
+    ((0, -0.316, 0),     (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.175, 87.0),
+    ((0.0825, 0, 0),     (np.pi / 2, 0, 0), -3.0718, -0.0698, 2.175, 87.0),
+    ((-0.0825, 0.384, 0), (-np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0),
+    ((0, 0, 0),          (np.pi / 2, 0, 0), -0.0175, 3.7525, 2.61, 12.0),
+    ((0.088, 0, 0),      (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0),
+]  # fmt: skip
+
+# Visual meshes: the detailed ones where the wheel has them, else the collision mesh.
+VISUAL = {
+    "link0": "collision/link0.obj", "link7": "collision/link7.obj",
+    "hand": "visual/hand.obj", "finger": "visual/finger.obj",
+}  # fmt: skip
+
+FINGER_ORIGIN_Z = 0.0584  # finger frames above the hand frame
+FINGER_TRAVEL = 0.04  # each finger, m
+FINGER_EFFORT = 40.0  # N, the bound on the squeeze each finger can apply
+FINGER_VELOCITY = 0.2  # m/s
+PAD_RADIUS = 0.003
+# Pad centres in the left finger's frame (inner face is the y = 0 plane of the mesh).
+PAD_XZ = [(-0.006, 0.040), (0.006, 0.040), (-0.006, 0.050), (0.006, 0.050)]
+
+
+def _fmt(v) -> str:
+    return " ".join(f"{x:.6g}" for x in v)
+
+
+def inertial(name: str) -> str:
+    """``<inertial>`` of the collision mesh as a uniform solid with the link's mass."""
+    m = MASS[name]
+    unit = CalcSpatialInertia(Mesh(str(MESHES / "collision" / f"{name}.obj")), 1.0)
+    com = unit.get_com()
+    Icm = unit.Shift(com).CalcRotationalInertia().CopyToFullMatrix3() * (m / unit.get_mass())
+    return (
+        f'    <inertial>\n      <origin xyz="{_fmt(com)}" rpy="0 0 0"/>\n'
+        f'      <mass value="{m}"/>\n'
+        f'      <inertia ixx="{Icm[0, 0]:.6g}" ixy="{Icm[0, 1]:.6g}" ixz="{Icm[0, 2]:.6g}" '
+        f'iyy="{Icm[1, 1]:.6g}" iyz="{Icm[1, 2]:.6g}" izz="{Icm[2, 2]:.6g}"/>\n'
+        f"    </inertial>\n"
+    )
+
+
+def visual(name: str, rpy: str = "0 0 0") -> str:
+    mesh = VISUAL.get(name, f"visual/{name}.obj")
+    return (
+        f'    <visual>\n      <origin xyz="0 0 0" rpy="{rpy}"/>\n'
+        f'      <geometry><mesh filename="{PKG}/{mesh}"/></geometry>\n'
+        f"    </visual>\n"
+    )
+
+
+def convex_collision(name: str) -> str:
+    return (
+        f"    <collision>\n"
+        f'      <geometry><mesh filename="{PKG}/collision/{name}.obj">'
+        f"<drake:declare_convex/></mesh></geometry>\n"
+        f"    </collision>\n"
+    )
+
+
+def arm() -> str:
+    out = ['<?xml version="1.0"?>\n<robot name="panda" xmlns:drake="http://drake.mit.edu">\n']
+    for i in range(8):
+        name = f"link{i}"
+        out.append(f'  <link name="panda_{name}">\n')
+        out.append(inertial(name) + visual(name) + convex_collision(name))
+        out.append("  </link>\n")
+    for i, (xyz, rpy, lo, hi, vel, effort) in enumerate(JOINTS, start=1):
+        out.append(
+            f'  <joint name="panda_joint{i}" type="revolute">\n'
+            f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>\n'
+            f'    <parent link="panda_link{i - 1}"/>\n    <child link="panda_link{i}"/>\n'
+            f'    <axis xyz="0 0 1"/>\n'
+            f'    <limit lower="{lo}" upper="{hi}" velocity="{vel}" effort="{effort}"/>\n'
+            f"  </joint>\n"
+            f'  <transmission name="panda_transmission{i}" type="SimpleTransmission">\n'
+            f'    <joint name="panda_joint{i}"/>\n    <actuator name="panda_motor{i}"/>\n'
+            f"  </transmission>\n"
+        )
+    out.append("</robot>\n")
+    return "".join(out)
+
+
+def finger_link(side: str, sign: int, with_pads: bool) -> str:
+    # The right finger is the left one turned half a turn about z.
+    rpy = "0 0 0" if sign > 0 else "0 0 3.14159265359"
+    out = [f'  <link name="panda_{side}finger">\n', inertial("finger"), visual("finger", rpy)]
+    if with_pads:
+        for k, (x, z) in enumerate(PAD_XZ):
+            out.append(
+                f'    <collision name="pad{k}">\n'
+                f'      <origin xyz="{sign * x:.6g} {sign * PAD_RADIUS:.6g} {z:.6g}"/>\n'
+                f'      <geometry><sphere radius="{PAD_RADIUS}"/></geometry>\n'
+                f"    </collision>\n"
+            )
+    out.append("  </link>\n")
+    return "".join(out)
+
+
+def hand(fingers_move: bool) -> str:
+    name = "panda_hand" if fingers_move else "panda_hand_welded"
+    out = [f'<?xml version="1.0"?>\n<robot name="{name}" xmlns:drake="http://drake.mit.edu">\n']
+    out.append('  <link name="panda_hand">\n' + inertial("hand") + visual("hand"))
+    out.append(convex_collision("hand") + "  </link>\n")
+    for side, sign, axis in (("left", 1, "0 1 0"), ("right", -1, "0 -1 0")):
+        out.append(finger_link(side, sign, with_pads=fingers_move))
+        joint = f"panda_finger_joint{1 if sign > 0 else 2}"
+        if fingers_move:
+            out.append(
+                f'  <joint name="{joint}" type="prismatic">\n'
+                f'    <origin xyz="0 0 {FINGER_ORIGIN_Z}" rpy="0 0 0"/>\n'
+                f'    <parent link="panda_hand"/>\n    <child link="panda_{side}finger"/>\n'
+                f'    <axis xyz="{axis}"/>\n'
+                f'    <limit lower="0" upper="{FINGER_TRAVEL}" velocity="{FINGER_VELOCITY}" '
+                f'effort="{FINGER_EFFORT}"/>\n'
+                f"  </joint>\n"
+                f'  <transmission name="{joint}_transmission" type="SimpleTransmission">\n'
+                f'    <joint name="{joint}"/>\n    <actuator name="{joint}_motor"/>\n'
+                f"  </transmission>\n"
+            )
+        else:
+            # Fingers held half open: their mass is what the control plant needs.
+            out.append(
+                f'  <joint name="{joint}" type="fixed">\n'
+                f'    <origin xyz="0 {sign * 0.02} {FINGER_ORIGIN_Z}" rpy="0 0 0"/>\n'
+                f'    <parent link="panda_hand"/>\n    <child link="panda_{side}finger"/>\n'
+                f"  </joint>\n"
+            )
+    out.append("</robot>\n")
+    return "".join(out)
+
+
+def main() -> None:
+    (HERE / "panda_arm.urdf").write_text(arm())
+    (HERE / "panda_hand.urdf").write_text(hand(fingers_move=True))
+    (HERE / "panda_hand_welded.urdf").write_text(hand(fingers_move=False))
+    print(f"wrote panda_arm.urdf, panda_hand.urdf, panda_hand_welded.urdf in {HERE}")
+
+
+if __name__ == "__main__":
+    main()
