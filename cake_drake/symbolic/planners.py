@@ -1,0 +1,281 @@
+"""Named planners: pyperplan searches in-process, Fast Downward as a subprocess.
+
+:data:`PLANNERS` is the registry; :func:`solve` plans from files and
+:func:`solve_problem` from a parsed :class:`Problem`. Every returned plan is
+re-checked with the validator before it is handed out.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from pyperplan.heuristics.lm_cut import LmCutHeuristic
+from pyperplan.heuristics.relaxation import hFFHeuristic, hMaxHeuristic
+from pyperplan.search.a_star import astar_search, greedy_best_first_search
+
+from cake_drake.errors import CakeDrakeError, InputError, NoPlanError
+from cake_drake.symbolic import fast_downward
+from cake_drake.symbolic.diagnose import diagnose
+from cake_drake.symbolic.grounding import to_task
+from cake_drake.symbolic.pddl import Problem, load_problem
+from cake_drake.symbolic.plans import Plan
+from cake_drake.symbolic.validation import validate_plan
+
+
+@dataclass(frozen=True)
+class PlannerInfo:
+    """A registry entry: what the planner is and whether its plans are shortest."""
+
+    name: str
+    search: str
+    heuristic: str
+    optimal: bool
+    backend: str  # "pyperplan" (in-process) or "fast-downward" (subprocess, `fd` extra)
+    summary: str
+
+
+#: The planners :func:`solve` knows, by name.
+PLANNERS: dict[str, PlannerInfo] = {
+    p.name: p
+    for p in (
+        PlannerInfo(
+            "astar-lmcut",
+            "A*",
+            "LM-cut",
+            True,
+            "pyperplan",
+            "optimal; the default (fast up to ~8 blocks)",
+        ),
+        PlannerInfo(
+            "astar-hmax",
+            "A*",
+            "hmax",
+            True,
+            "pyperplan",
+            "optimal; weaker heuristic than LM-cut, for comparison",
+        ),
+        PlannerInfo(
+            "gbfs-ff",
+            "greedy best-first with preferred operators",
+            "hFF",
+            False,
+            "pyperplan",
+            "satisficing; fast on big problems, plans may be longer than necessary",
+        ),
+        PlannerInfo(
+            "fd-lama-first",
+            "Fast Downward lazy greedy best-first (lama-first)",
+            "hFF + landmarks",
+            False,
+            "fast-downward",
+            "satisficing; Fast Downward, needs the fd extra",
+        ),
+        PlannerInfo(
+            "fd-seq-opt-lmcut",
+            "Fast Downward A* (seq-opt-lmcut)",
+            "LM-cut",
+            True,
+            "fast-downward",
+            "optimal; Fast Downward, needs the fd extra",
+        ),
+    )
+}
+
+DEFAULT_PLANNER = "astar-lmcut"
+
+_FD_ALIASES = {"fd-lama-first": "lama-first", "fd-seq-opt-lmcut": "seq-opt-lmcut"}
+
+
+def planner_info(name: str) -> PlannerInfo:
+    """The registry entry for ``name``; :class:`InputError` listing the valid names otherwise."""
+    try:
+        return PLANNERS[name]
+    except KeyError:
+        raise InputError(f"unknown planner '{name}' (choose from: {', '.join(PLANNERS)})") from None
+
+
+class _LmCut(LmCutHeuristic):
+    """pyperplan's LM-cut over our integer fact ids.
+
+    LM-cut formats its facts with ``str()`` (which must return a ``str``) and
+    looks them up again by name, so each fact also gets its string name as a key.
+    The integer keys keep set iteration, and so the search, independent of
+    ``PYTHONHASHSEED``.
+    """
+
+    def __init__(self, task):
+        super().__init__(task)
+        for key, fact in list(self.relaxed_facts.items()):
+            if not isinstance(key, str):
+                fact.name = str(key)
+                self.relaxed_facts[fact.name] = fact
+
+
+class _TimeUp(Exception):
+    pass
+
+
+class _Deadline:
+    """Wraps a pyperplan heuristic: counts evaluations and stops the search at a deadline.
+
+    Every generated node is evaluated, so checking the clock here bounds the
+    search time without threads or subprocesses.
+    """
+
+    def __init__(self, heuristic, deadline: float | None):
+        self._h = heuristic
+        self._deadline = deadline
+        self.evaluations = 0
+
+    def _tick(self) -> None:
+        self.evaluations += 1
+        if self._deadline is not None and time.perf_counter() > self._deadline:
+            raise _TimeUp
+
+    def __call__(self, node):
+        self._tick()
+        return self._h(node)
+
+    def calc_h_with_plan(self, node):
+        self._tick()
+        return self._h.calc_h_with_plan(node)
+
+
+@contextmanager
+def _quiet_pyperplan():
+    """pyperplan logs through the root logger (and would install a handler on first
+    use); keep it silent for the duration of a search and leave logging as it was."""
+    root = logging.getLogger()
+    guard = None
+    if not root.handlers:
+        guard = logging.NullHandler()
+        root.addHandler(guard)
+    previous = logging.root.manager.disable
+    logging.disable(logging.INFO)
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+        if guard is not None:
+            root.removeHandler(guard)
+
+
+def _pyperplan_search(name: str, task, deadline: float | None):
+    """Run the search for ``name``; returns (operators or None, evaluation count)."""
+    if name == "astar-lmcut":
+        h = _Deadline(_LmCut(task), deadline)
+        return astar_search(task, h), h.evaluations
+    if name == "astar-hmax":
+        h = _Deadline(hMaxHeuristic(task), deadline)
+        return astar_search(task, h), h.evaluations
+    if name == "gbfs-ff":
+        h = _Deadline(hFFHeuristic(task), deadline)
+        ops = greedy_best_first_search(task, h, use_relaxed_plan=True)
+        if ops is None:
+            # Preferred-operator pruning can lose every plan; plain GBFS is complete.
+            ops = greedy_best_first_search(task, h, use_relaxed_plan=False)
+        return ops, h.evaluations
+    raise AssertionError(name)
+
+
+def _no_plan_message(problem: Problem, why: str) -> str:
+    found = diagnose(problem)
+    diagnosis = (
+        "; ".join(found)
+        if found
+        else ("the Blocksworld checks and the delete relaxation find no inconsistency")
+    )
+    return f"no plan exists for problem '{problem.name}': {why}; diagnosis: {diagnosis}"
+
+
+def _gave_up_message(problem: Problem, planner: str, time_limit: float, detail: str) -> str:
+    other = "gbfs-ff" if planner != "gbfs-ff" else "fd-lama-first"
+    return (
+        f"no plan found for problem '{problem.name}' within the {time_limit:g} s time limit: "
+        f"planner {planner} gave up {detail}; this does not prove that no plan exists "
+        f"(try a larger --time-limit or --planner {other})"
+    )
+
+
+def solve_problem(
+    problem: Problem, planner: str = DEFAULT_PLANNER, time_limit: float | None = None
+) -> Plan:
+    """Plan for a parsed problem with the named planner.
+
+    Raises :class:`NoPlanError` when no plan exists (with a diagnosis) or when
+    the time limit is reached (said differently), :class:`InputError` for an
+    unknown planner, a bad time limit or a missing Fast Downward.
+    """
+    info = planner_info(planner)
+    if time_limit is not None and not time_limit > 0:
+        raise InputError(f"time limit must be a positive number of seconds, got {time_limit!r}")
+    if not problem.has_goal:
+        raise InputError(f"problem '{problem.name}' has no (:goal ...): nothing to plan for")
+
+    if info.backend == "fast-downward":
+        result = fast_downward.run(problem, _FD_ALIASES[planner], planner, time_limit)
+        if result.status == "limit":
+            raise NoPlanError(_gave_up_message(problem, planner, time_limit or 0, "at the limit"))
+        if result.status == "memory":
+            raise NoPlanError(
+                f"no plan found for problem '{problem.name}': planner {planner} ran out of "
+                "memory; this does not prove that no plan exists (try --planner fd-lama-first)"
+            )
+        if result.status == "incomplete":
+            raise NoPlanError(
+                f"no plan found for problem '{problem.name}': planner {planner} ran out of "
+                "states to explore, but its search is incomplete, so this proves nothing"
+            )
+        if result.status == "unsolvable":
+            raise NoPlanError(_no_plan_message(problem, f"{planner} proved it unsolvable"))
+        actions, elapsed = result.actions, result.time_s
+    else:
+        t0 = time.perf_counter()
+        deadline = None if time_limit is None else t0 + time_limit
+        search_task = to_task(problem)
+        if search_task.unreachable_goals:
+            raise NoPlanError(
+                _no_plan_message(problem, "proved before search, by the delete relaxation")
+            )
+        try:
+            with _quiet_pyperplan():
+                ops, evaluations = _pyperplan_search(planner, search_task.task, deadline)
+        except _TimeUp:
+            raise NoPlanError(
+                _gave_up_message(problem, planner, time_limit or 0, "at the limit")
+            ) from None
+        except MemoryError:
+            raise NoPlanError(
+                f"no plan found for problem '{problem.name}': planner {planner} ran out of "
+                "memory; this does not prove that no plan exists (try --planner gbfs-ff)"
+            ) from None
+        elapsed = time.perf_counter() - t0
+        if ops is None:
+            raise NoPlanError(
+                _no_plan_message(
+                    problem,
+                    f"{planner} searched every reachable state ({evaluations} evaluated)",
+                )
+            )
+        actions = tuple(search_task.actions[op.name] for op in ops)
+
+    plan = Plan(actions, planner, info.search, info.heuristic, elapsed, info.optimal)
+    check = validate_plan(problem, plan.actions)
+    if not check.ok:  # a planner bug, not a user error: say so plainly
+        raise CakeDrakeError(f"planner {planner} returned an invalid plan: {check.message}")
+    return plan
+
+
+def solve(
+    domain_path: str | Path,
+    problem_path: str | Path,
+    planner: str = DEFAULT_PLANNER,
+    time_limit: float | None = None,
+) -> Plan:
+    """Parse the two files and plan; see :func:`solve_problem`."""
+    planner_info(planner)  # an unknown name is reported before the files are read
+    return solve_problem(load_problem(domain_path, problem_path), planner, time_limit)
