@@ -255,7 +255,7 @@ def set_cube_poses(scene: Scene, context, poses: Mapping[str, RigidTransform]) -
 def set_default_cube_poses(scene: Scene, poses: Mapping[str, RigidTransform]) -> None:
     """Make ``poses`` the cubes' default poses, so every new context starts there."""
     for name, X_WB in poses.items():
-        scene.plant.SetDefaultFreeBodyPose(scene.cube_body(name), X_WB)
+        scene.plant.SetDefaultFloatingBaseBodyPose(scene.cube_body(name), X_WB)
 
 
 def cube_poses(scene: Scene, context) -> dict[str, RigidTransform]:

@@ -52,17 +52,21 @@ JOINTS = [
     ((0.088, 0, 0),      (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0),
 ]  # fmt: skip
 
-# Visual meshes: the detailed ones where the wheel has them, else the collision mesh.
+# Visual meshes: the detailed ones where the wheel has them. Links 0 and 7 have none; their
+# collision meshes name a material file the wheel lacks (a warning on every load), so a
+# copy without that line is kept in meshes/ here (Apache-2.0, as the wheel's LICENSE.txt).
+OWN_MESHES = HERE / "meshes"
 VISUAL = {
-    "link0": "collision/link0.obj", "link7": "collision/link7.obj",
-    "hand": "visual/hand.obj", "finger": "visual/finger.obj",
-}  # fmt: skip
+    "link0": "package://cake_drake/panda/meshes/link0.obj",
+    "link7": "package://cake_drake/panda/meshes/link7.obj",
+}
 
 FINGER_ORIGIN_Z = 0.0584  # finger frames above the hand frame
 FINGER_TRAVEL = 0.04  # each finger, m
 FINGER_EFFORT = 40.0  # N, the bound on the squeeze each finger can apply
 FINGER_VELOCITY = 0.2  # m/s
 PAD_RADIUS = 0.003
+PAD_STIFFNESS = 1e5  # N/m: rubber-like pads, about 0.1 mm in at a 20 N squeeze
 # Pad centres in the left finger's frame (inner face is the y = 0 plane of the mesh).
 PAD_XZ = [(-0.006, 0.040), (0.006, 0.040), (-0.006, 0.050), (0.006, 0.050)]
 
@@ -87,12 +91,22 @@ def inertial(name: str) -> str:
 
 
 def visual(name: str, rpy: str = "0 0 0") -> str:
-    mesh = VISUAL.get(name, f"visual/{name}.obj")
+    mesh = VISUAL.get(name, f"{PKG}/visual/{name}.obj")
+    colour = "" if name not in VISUAL else '      <material><color rgba="0.95 0.95 0.95 1"/></material>\n'
     return (
         f'    <visual>\n      <origin xyz="0 0 0" rpy="{rpy}"/>\n'
-        f'      <geometry><mesh filename="{PKG}/{mesh}"/></geometry>\n'
+        f'      <geometry><mesh filename="{mesh}"/></geometry>\n{colour}'
         f"    </visual>\n"
     )
+
+
+def copy_plain_meshes() -> None:
+    """Copy the collision meshes that serve as visuals, minus their dangling ``mtllib``."""
+    OWN_MESHES.mkdir(exist_ok=True)
+    for name in VISUAL:
+        lines = (MESHES / "collision" / f"{name}.obj").read_text().splitlines(keepends=True)
+        kept = [line for line in lines if not line.startswith(("mtllib", "usemtl"))]
+        (OWN_MESHES / f"{name}.obj").write_text("".join(kept))
 
 
 def convex_collision(name: str) -> str:
@@ -137,6 +151,11 @@ def finger_link(side: str, sign: int, with_pads: bool) -> str:
                 f'    <collision name="pad{k}">\n'
                 f'      <origin xyz="{sign * x:.6g} {sign * PAD_RADIUS:.6g} {z:.6g}"/>\n'
                 f'      <geometry><sphere radius="{PAD_RADIUS}"/></geometry>\n'
+                f"      <drake:proximity_properties>\n"
+                f'        <drake:mu_dynamic value="1.0"/>\n        <drake:mu_static value="1.0"/>\n'
+                f'        <drake:point_contact_stiffness value="{PAD_STIFFNESS:g}"/>\n'
+                f'        <drake:hunt_crossley_dissipation value="5"/>\n'
+                f"      </drake:proximity_properties>\n"
                 f"    </collision>\n"
             )
     out.append("  </link>\n")
@@ -177,6 +196,7 @@ def hand(fingers_move: bool) -> str:
 
 
 def main() -> None:
+    copy_plain_meshes()
     (HERE / "panda_arm.urdf").write_text(arm())
     (HERE / "panda_hand.urdf").write_text(hand(fingers_move=True))
     (HERE / "panda_hand_welded.urdf").write_text(hand(fingers_move=False))

@@ -1,0 +1,168 @@
+"""From a symbolic action and the *measured* world to named Cartesian gripper poses.
+
+Blocksworld splits one pick-and-place into two actions, so the six phases of the
+exercise split between them:
+
+* ``pick-up x`` / ``unstack x y`` (approach and grasp): **pre-grasp** (above x at the
+  transit height), **grasp**
+  (grasp frame at x's centre; the fingers close here), **lift** (straight up to the
+  transit height);
+* ``put-down x`` / ``stack x y`` (transport and place): **transport** (above the target at
+  the transit height), **place** (x resting on the table slot or on y; the fingers open
+  here), **retract** (straight up to the transit height).
+
+All moves between actions thus happen at the transit height, which clears the tallest
+tower by ``transit_clearance`` with a cube in the hand.
+
+Every pose comes from measured poses: the grasp from x's pose, the place height from the
+support's measured top, and the gripper pose at *place* from where the held cube
+actually sits in the hand (so a cube that slipped is still set down where it belongs).
+The gripper points down; its yaw follows the cube's yaw modulo 90 degrees, choosing the
+turn nearest to the direction from the robot base (where the wrist is comfortable).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+
+from cake_drake.errors import ExecutionError
+from cake_drake.symbolic import GroundAction
+from cake_drake.world.scene import CUBE_SIZE, SLOTS
+
+PICK_ACTIONS = ("pick-up", "unstack")
+PLACE_ACTIONS = ("put-down", "stack")
+PHASES = ("pre-grasp", "grasp", "lift", "transport", "place", "retract")
+
+
+@dataclass(frozen=True)
+class WaypointParams:
+    """Distances that shape the motion (metres)."""
+
+    approach: float = 0.06  # pre-grasp and retract: this far above grasp/place
+    transit_clearance: float = 0.05  # held cube's bottom this far above every tower
+    place_drop: float = 0.002  # release the cube this far above its support
+    slot_clearance: float = 0.07  # a table slot is free if no cube is this close (xy)
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """One named gripper pose; ``gripper`` is the command *after* reaching it."""
+
+    phase: str
+    X_WG: RigidTransform
+    gripper: str  # "open" or "closed"
+
+
+@dataclass(frozen=True)
+class WorldView:
+    """What the geometric layer measures of the world at the start of an action."""
+
+    cube_poses: Mapping[str, RigidTransform]
+    X_WG: RigidTransform  # current gripper (grasp frame) pose
+    held: str | None = None  # name of the cube in the hand, if any
+
+
+def gripper_down(yaw: float) -> RotationMatrix:
+    """Grasp-frame orientation pointing straight down, turned by ``yaw`` about world z."""
+    return RotationMatrix.MakeZRotation(yaw) @ RotationMatrix.MakeXRotation(math.pi)
+
+
+def _yaw(X: RigidTransform) -> float:
+    return float(RollPitchYaw(X.rotation()).yaw_angle())
+
+
+def _nearest_turn(yaw: float, preferred: float) -> float:
+    """``yaw + k * 90 deg`` closest to ``preferred``."""
+    k = round((preferred - yaw) / (math.pi / 2))
+    return yaw + k * math.pi / 2
+
+
+def _transit_height(
+    poses: Mapping[str, RigidTransform], held: str | None, params: WaypointParams
+) -> float:
+    """Grasp-frame height that carries a (held) cube clear of every tower."""
+    tops = [X.translation()[2] + CUBE_SIZE / 2 for n, X in poses.items() if n != held]
+    return max(tops, default=0.0) + CUBE_SIZE / 2 + params.transit_clearance
+
+
+def free_slot(
+    poses: Mapping[str, RigidTransform], held: str | None, params: WaypointParams
+) -> tuple[float, float]:
+    """The first table slot with no cube near it (the held cube does not count)."""
+    for x, y in SLOTS:
+        if all(
+            np.hypot(X.translation()[0] - x, X.translation()[1] - y) > params.slot_clearance
+            for n, X in poses.items()
+            if n != held
+        ):
+            return x, y
+    raise ExecutionError("put-down: every table slot is taken; the world has no free slot")
+
+
+def waypoints_for(
+    action: GroundAction, world: WorldView, params: WaypointParams = WaypointParams()
+) -> list[Waypoint]:
+    """The named gripper poses for ``action``, computed from ``world`` (see module doc)."""
+    name, args = action.name, action.args
+    poses = world.cube_poses
+    missing = [a for a in args if a not in poses]
+    if missing:
+        raise ExecutionError(f"{action}: no cube named {missing[0]!r} in the world")
+    block = args[0]
+    if name in PICK_ACTIONS:
+        X_WB = poses[block]
+        p = X_WB.translation()
+        yaw = _nearest_turn(_yaw(X_WB), math.atan2(p[1], p[0]))
+        R = gripper_down(yaw)
+        z_transit = _transit_height(poses, held=None, params=params)
+        above = max(z_transit, p[2] + params.approach)
+        return [
+            Waypoint("pre-grasp", RigidTransform(R, [p[0], p[1], above]), "open"),
+            Waypoint("grasp", RigidTransform(R, p), "closed"),
+            Waypoint("lift", RigidTransform(R, [p[0], p[1], max(z_transit, p[2])]), "closed"),
+        ]
+    if name in PLACE_ACTIONS:
+        if name == "stack":
+            X_WS = poses[args[1]]
+            target = X_WS.translation() + [0, 0, CUBE_SIZE + params.place_drop]
+            target_yaw = _yaw(X_WS)
+        else:
+            x, y = free_slot(poses, block, params)
+            target = np.array([x, y, CUBE_SIZE / 2 + params.place_drop])
+            target_yaw = math.atan2(y, x)
+        # Where the cube sits in the hand, measured now: X_GB = X_WG^-1 X_WB.
+        X_GB = world.X_WG.inverse() @ poses[block]
+        # Cube yaw that is a quarter turn of the target's, with the gripper yaw nearest
+        # to the comfortable one.
+        preferred = math.atan2(target[1], target[0])
+        grip_minus_cube = _yaw(world.X_WG) - _yaw(poses[block])
+        cube_yaw = _nearest_turn(target_yaw, preferred - grip_minus_cube)
+        X_WB_target = RigidTransform(RotationMatrix.MakeZRotation(cube_yaw), target)
+        X_place = X_WB_target @ X_GB.inverse()
+        # Keep the gripper pointing straight down even if the cube tilted in the hand.
+        R = gripper_down(_yaw(X_place))
+        X_place = RigidTransform(R, X_place.translation())
+        z_transit = max(_transit_height(poses, block, params), X_place.translation()[2])
+        above = X_place.translation().copy()
+        above[2] = z_transit
+        # Up and clear of the tower just built, so the next move crosses nothing.
+        retract = X_place.translation().copy()
+        retract[2] = max(z_transit, retract[2] + params.approach)
+        return [
+            Waypoint("transport", RigidTransform(R, above), "closed"),
+            Waypoint("place", X_place, "open"),
+            Waypoint("retract", RigidTransform(R, retract), "open"),
+        ]
+    raise ExecutionError(
+        f"{action}: no waypoints for action {name!r}; the geometric layer knows "
+        f"{', '.join(PICK_ACTIONS + PLACE_ACTIONS)}"
+    )
+
+
+def describe(waypoints: Sequence[Waypoint]) -> str:
+    return ", ".join(f"{w.phase} {np.round(w.X_WG.translation(), 3).tolist()}" for w in waypoints)

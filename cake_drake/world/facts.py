@@ -1,0 +1,77 @@
+"""Read simulated cube poses back as Blocksworld facts: the bridge every check uses.
+
+A cube is *on the table* when its centre is half a cube above the table top, *on*
+another cube when its centre is one cube above that cube's centre and within half a
+cube of it horizontally, and *clear* when no cube is on it. A cube that is tilted more
+than :data:`TILT_TOL` rests on neither and is reported.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+from cake_drake.world.scene import CUBE_SIZE
+
+HEIGHT_TOL = 0.006  # m: how far a resting cube's centre may be from its nominal height
+TILT_TOL = 0.1  # rad: a cube tilted more than this does not rest flat
+
+
+@dataclass(frozen=True)
+class Reading:
+    """Facts read from poses, plus what could not be classified."""
+
+    facts: frozenset[tuple[str, ...]]
+    problems: tuple[str, ...]
+
+
+def _tilt(X: RigidTransform) -> float:
+    """Angle between the cube's nearest face normal and world z (cubes are symmetric)."""
+    R = X.rotation().matrix()
+    return float(np.arccos(np.clip(np.max(np.abs(R[2, :])), -1.0, 1.0)))
+
+
+def read_facts(poses: Mapping[str, RigidTransform], size: float = CUBE_SIZE) -> Reading:
+    """Facts ``on``, ``on-table`` and ``clear`` for cubes at ``poses`` (world frame)."""
+    facts: set[tuple[str, ...]] = set()
+    problems: list[str] = []
+    supported: set[str] = set()
+    covered: set[str] = set()
+    for name, X in sorted(poses.items()):
+        p = X.translation()
+        if _tilt(X) > TILT_TOL:
+            problems.append(f"{name} is tilted by {np.degrees(_tilt(X)):.0f} deg")
+            continue
+        if abs(p[2] - size / 2) < HEIGHT_TOL:
+            facts.add(("on-table", name))
+            supported.add(name)
+            continue
+        below = [
+            other
+            for other, Y in sorted(poses.items())
+            if other != name
+            and abs(p[2] - Y.translation()[2] - size) < HEIGHT_TOL
+            and np.linalg.norm(p[:2] - Y.translation()[:2]) < size / 2
+        ]
+        if below:
+            facts.add(("on", name, below[0]))
+            supported.add(name)
+            covered.add(below[0])
+        else:
+            problems.append(f"{name} rests on nothing (centre at z = {p[2] * 1000:.1f} mm)")
+    for name in sorted(poses):
+        if name in supported and name not in covered:
+            facts.add(("clear", name))
+    return Reading(frozenset(facts), tuple(problems))
+
+
+def stack_offsets(poses: Mapping[str, RigidTransform], facts) -> dict[str, float]:
+    """Horizontal offset (m) of every stacked cube from the cube it stands on."""
+    return {
+        f[1]: float(np.linalg.norm(poses[f[1]].translation()[:2] - poses[f[2]].translation()[:2]))
+        for f in facts
+        if f[0] == "on"
+    }

@@ -1,0 +1,96 @@
+"""Headless pictures of the world: Drake's ``RgbdSensor`` on ``RenderEngineVtk``.
+
+VTK renders through EGL on Mesa's software rasteriser, so no display and no GPU are
+needed (Debian packages: libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1). The renderer
+lives in its own small diagram, built from a world state, so the simulation diagram
+carries no camera and a picture can be taken of any state.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import (
+    ClippingRange,
+    ColorRenderCamera,
+    DepthRange,
+    DepthRenderCamera,
+    MakeRenderEngineVtk,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+)
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.sensors import CameraInfo, RgbdSensor
+
+from cake_drake.errors import InputError
+from cake_drake.world.scene import Q_HOME, WorldConfig, add_world, set_arm_positions, set_cube_poses
+
+RENDERER = "vtk"
+#: Default viewpoint: in front of and to the right of the robot, looking at the slots.
+EYE = (1.45, -1.0, 0.95)
+TARGET = (0.3, 0.0, 0.28)
+
+
+def look_at(eye: Sequence[float], target: Sequence[float]) -> RigidTransform:
+    """Camera pose ``X_WC`` (Drake camera frame: +z forward, +x right, +y down)."""
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), eye)
+
+
+class Renderer:
+    """A world for pictures only: build once (meshes load here), then :meth:`render` states."""
+
+    def __init__(self, blocks: Sequence[str], width: int = 800, height: int = 600,
+                 eye: Sequence[float] = EYE, target: Sequence[float] = TARGET) -> None:
+        builder = DiagramBuilder()
+        self.scene = add_world(builder, blocks, WorldConfig(time_step=0.0))
+        sg = self.scene.scene_graph
+        sg.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
+        core = RenderCameraCore(
+            RENDERER, CameraInfo(width, height, np.radians(45.0)),
+            ClippingRange(0.05, 5.0), RigidTransform(),
+        )
+        # Only the colour image is ever evaluated; the depth camera is required by the API.
+        self._sensor = builder.AddSystem(
+            RgbdSensor(
+                sg.world_frame_id(),
+                look_at(eye, target),
+                ColorRenderCamera(core, False),
+                DepthRenderCamera(core, DepthRange(0.06, 4.9)),
+            )
+        )
+        builder.Connect(sg.get_query_output_port(), self._sensor.query_object_input_port())
+        self._diagram = builder.Build()
+        self._context = self._diagram.CreateDefaultContext()
+        self._plant_context = self.scene.plant.GetMyMutableContextFromRoot(self._context)
+
+    def render(self, cube_poses: Mapping[str, RigidTransform], q_arm: Sequence[float] = Q_HOME,
+               fingers: float = 0.04) -> np.ndarray:
+        """RGBA image (height x width x 4, uint8) of the world in the given state."""
+        set_arm_positions(self.scene, self._plant_context, q_arm, fingers)
+        set_cube_poses(self.scene, self._plant_context, cube_poses)
+        sensor_context = self._sensor.GetMyContextFromRoot(self._context)
+        image = self._sensor.color_image_output_port().Eval(sensor_context)
+        return np.array(image.data, copy=True)
+
+
+def save_png(rgba: np.ndarray, path: str | Path) -> None:
+    """Write an RGBA array as PNG (written whole: to a temporary name, then renamed)."""
+    import matplotlib.image
+
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    try:
+        matplotlib.image.imsave(tmp, rgba, format="png")
+        tmp.replace(path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"{path}: cannot write the picture ({e.strerror})") from None
