@@ -35,11 +35,12 @@ from pydrake.systems.primitives import Demultiplexer, LogVectorOutput, VectorLog
 from cake_drake.dynamic.reference import ReferenceTrajectory
 from cake_drake.errors import InputError
 from cake_drake.geometric.ik import Kinematics, make_solver
+from cake_drake.geometric.solve import TimedSolver
 from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
 from cake_drake.symbolic import GroundAction
 from cake_drake.systems.plan_source import PlanSource
-from cake_drake.systems.waypoint_ik import REFERENCE_SIZE, WaypointIk
+from cake_drake.systems.waypoint_ik import WaypointIk
 from cake_drake.world.scene import (
     Q_HOME,
     X_HAND_GRASP,
@@ -99,6 +100,8 @@ class CakeDiagram:
     waypoint_ik: WaypointIk | None = None
     reference: ReferenceTrajectory | None = None
     control_plant: object = None
+    ik: TimedSolver | None = None
+    visualizer: object = None  # MeshcatVisualizer, with --meshcat
 
 
 def build_diagram(
@@ -107,8 +110,12 @@ def build_diagram(
     initial_poses: Mapping[str, RigidTransform],
     actions: Sequence[GroundAction] = (),
     q_start: np.ndarray = Q_HOME,
+    meshcat=None,
 ) -> CakeDiagram:
-    """Wire planner, geometry and controller around the simulated Panda."""
+    """Wire planner, geometry and controller around the simulated Panda.
+
+    ``meshcat`` (a ``pydrake.geometry.Meshcat``) adds a visualizer; never needed headless.
+    """
     config.check()
     builder = DiagramBuilder()
     arm_gains = (POSITION_KP, POSITION_KD) if config.mode == "position" else None
@@ -121,16 +128,24 @@ def build_diagram(
     control_plant = make_control_plant()
 
     # The reference: either the planner + waypoint/IK layers, or a recorded trajectory.
-    plan_source = waypoint_ik = reference = None
+    plan_source = waypoint_ik = reference = solver = None
     if config.reference is None:
         plan_source = builder.AddNamedSystem("plan_source", PlanSource(actions))
-        solver = make_solver(config.ik, Kinematics(control_plant))
+        solver = TimedSolver(make_solver(config.ik, Kinematics(control_plant)))
         cube_bodies = {n: int(scene.cube_body(n).index()) for n in blocks}
         hand_body = int(plant.GetBodyByName("panda_hand", scene.hand).index())
         waypoint_ik = builder.AddNamedSystem(
             "waypoint_ik",
-            WaypointIk(solver, q_start, cube_bodies, hand_body, X_HAND_GRASP, dt,
-                       config.timing, config.waypoints),  # fmt: skip
+            WaypointIk(
+                solver,
+                q_start,
+                cube_bodies,
+                hand_body,
+                X_HAND_GRASP,
+                dt,
+                config.timing,
+                config.waypoints,
+            ),  # fmt: skip
         )
         builder.Connect(plan_source.GetOutputPort("action"), waypoint_ik.GetInputPort("action"))
         builder.Connect(plant.get_body_poses_output_port(), waypoint_ik.GetInputPort("body_poses"))
@@ -139,11 +154,11 @@ def build_diagram(
         reference = ReferenceTrajectory.from_npz(config.reference, config.differentiate)
         source = builder.AddNamedSystem("reference", reference.make_source())
         reference_port = source.get_output_port()
-    split = builder.AddNamedSystem(
-        "split_reference", Demultiplexer([14, 7, 4, 1, 2])
-    )
+    split = builder.AddNamedSystem("split_reference", Demultiplexer([14, 7, 4, 1, 2]))
     builder.Connect(reference_port, split.get_input_port())
-    desired_state, desired_accel, fingers, done, labels = (split.get_output_port(i) for i in range(5))
+    desired_state, desired_accel, fingers, done, labels = (
+        split.get_output_port(i) for i in range(5)
+    )
     if plan_source is not None:
         builder.Connect(done, plan_source.GetInputPort("actions_done"))
     builder.Connect(fingers, plant.get_desired_state_input_port(scene.hand))
@@ -160,30 +175,43 @@ def build_diagram(
         builder.Connect(arm_state, controller.get_input_port_estimated_state())
         builder.Connect(desired_state, controller.get_input_port_desired_state())
         builder.Connect(desired_accel, controller.get_input_port_desired_acceleration())
-        builder.Connect(controller.get_output_port_control(), plant.get_actuation_input_port(scene.arm))
-        loggers["tau_commanded"] = LogVectorOutput(controller.get_output_port_control(), builder, dt)
+        builder.Connect(
+            controller.get_output_port_control(), plant.get_actuation_input_port(scene.arm)
+        )
+        loggers["tau_commanded"] = LogVectorOutput(
+            controller.get_output_port_control(), builder, dt
+        )
     else:
         # Feed-forward: the torque the reference needs, M(q_d) a_d + C(q_d, v_d) v_d + g(q_d),
         # from Drake's InverseDynamics evaluated on the *desired* state; the PD corrects.
         feedforward = builder.AddNamedSystem(
-            "feedforward", InverseDynamics(control_plant, InverseDynamics.InverseDynamicsMode.kInverseDynamics)
+            "feedforward",
+            InverseDynamics(control_plant, InverseDynamics.InverseDynamicsMode.kInverseDynamics),
         )
         builder.Connect(desired_state, feedforward.get_input_port_estimated_state())
         builder.Connect(desired_accel, feedforward.get_input_port_desired_acceleration())
         builder.Connect(desired_state, plant.get_desired_state_input_port(scene.arm))
         builder.Connect(
-            feedforward.get_output_port_generalized_force(), plant.get_actuation_input_port(scene.arm)
+            feedforward.get_output_port_generalized_force(),
+            plant.get_actuation_input_port(scene.arm),
         )
         loggers["tau_commanded"] = LogVectorOutput(
             feedforward.get_output_port_generalized_force(), builder, dt
         )
     loggers["state"] = LogVectorOutput(arm_state, builder, dt)
     loggers["reference"] = LogVectorOutput(reference_port, builder, dt)
-    loggers["tau_applied"] = LogVectorOutput(plant.get_net_actuation_output_port(scene.arm), builder, dt)
+    loggers["tau_applied"] = LogVectorOutput(
+        plant.get_net_actuation_output_port(scene.arm), builder, dt
+    )
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
+    visualizer = None
+    if meshcat is not None:
+        from pydrake.visualization import AddDefaultVisualization
+
+        AddDefaultVisualization(builder, meshcat)
+        visualizer = meshcat
     diagram = builder.Build()
     diagram.set_name("cake_drake")
-    assert REFERENCE_SIZE == 28
     return CakeDiagram(diagram, scene, config, loggers, plan_source, waypoint_ik, reference,
-                       control_plant)  # fmt: skip
+                       control_plant, solver, visualizer)  # fmt: skip

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from cake_drake.errors import IkError
@@ -49,3 +51,19 @@ def solve_action(
             trajectory.hold(timing.gripper_time, wp.phase, index, gripper=want)
         q_seed = q
     return solutions
+
+
+class TimedSolver:
+    """Wraps an :class:`IkSolver` and records the wall time of every solve (ms)."""
+
+    def __init__(self, solver: IkSolver) -> None:
+        self.solver = solver
+        self.name = solver.name
+        self.times_ms: list[float] = []
+
+    def solve(self, X_WG, q_seed):
+        t0 = time.perf_counter()
+        try:
+            return self.solver.solve(X_WG, q_seed)
+        finally:
+            self.times_ms.append((time.perf_counter() - t0) * 1000)

@@ -85,7 +85,9 @@ class JointTrajectory:
 
     def copy(self) -> JointTrajectory:
         """A new trajectory sharing the (immutable) segments, to append to."""
-        return JointTrajectory(self.start_q, self.start_time, list(self.segments), list(self._starts))
+        return JointTrajectory(
+            self.start_q, self.start_time, list(self.segments), list(self._starts)
+        )
 
     @property
     def end_time(self) -> float:

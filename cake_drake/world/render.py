@@ -48,15 +48,23 @@ def look_at(eye: Sequence[float], target: Sequence[float]) -> RigidTransform:
 class Renderer:
     """A world for pictures only: build once (meshes load here), then :meth:`render` states."""
 
-    def __init__(self, blocks: Sequence[str], width: int = 800, height: int = 600,
-                 eye: Sequence[float] = EYE, target: Sequence[float] = TARGET) -> None:
+    def __init__(
+        self,
+        blocks: Sequence[str],
+        width: int = 800,
+        height: int = 600,
+        eye: Sequence[float] = EYE,
+        target: Sequence[float] = TARGET,
+    ) -> None:
         builder = DiagramBuilder()
         self.scene = add_world(builder, blocks, WorldConfig(time_step=0.0))
         sg = self.scene.scene_graph
         sg.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
         core = RenderCameraCore(
-            RENDERER, CameraInfo(width, height, np.radians(45.0)),
-            ClippingRange(0.05, 5.0), RigidTransform(),
+            RENDERER,
+            CameraInfo(width, height, np.radians(45.0)),
+            ClippingRange(0.05, 5.0),
+            RigidTransform(),
         )
         # Only the colour image is ever evaluated; the depth camera is required by the API.
         self._sensor = builder.AddSystem(
@@ -72,8 +80,12 @@ class Renderer:
         self._context = self._diagram.CreateDefaultContext()
         self._plant_context = self.scene.plant.GetMyMutableContextFromRoot(self._context)
 
-    def render(self, cube_poses: Mapping[str, RigidTransform], q_arm: Sequence[float] = Q_HOME,
-               fingers: float = 0.04) -> np.ndarray:
+    def render(
+        self,
+        cube_poses: Mapping[str, RigidTransform],
+        q_arm: Sequence[float] = Q_HOME,
+        fingers: float = 0.04,
+    ) -> np.ndarray:
         """RGBA image (height x width x 4, uint8) of the world in the given state."""
         set_arm_positions(self.scene, self._plant_context, q_arm, fingers)
         set_cube_poses(self.scene, self._plant_context, cube_poses)

@@ -34,7 +34,8 @@ from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError
 
 CUBE_SIZE = 0.04  # m, edge of every cube
-#: Cube names the models folder has a coloured cube for, with the colour's name.
+#: The coloured cube models in models/cubes (cube_<key>.sdf) and their colours. Blocks
+#: take them in sorted order of their names: for a..e, block a is the red cube.
 CUBE_COLOURS: dict[str, str] = {
     "a": "red",
     "b": "orange",
@@ -63,9 +64,7 @@ def _slots() -> tuple[tuple[float, float], ...]:
     """
     angles = [-7.5, 7.5, -22.5, 22.5, -37.5, 37.5, -52.5, 52.5]
     r = 0.55
-    return tuple(
-        (r * math.cos(math.radians(a)), r * math.sin(math.radians(a))) for a in angles
-    )
+    return tuple((r * math.cos(math.radians(a)), r * math.sin(math.radians(a))) for a in angles)
 
 
 #: (x, y) of each table slot, in the order towers are assigned to them.
@@ -129,6 +128,16 @@ def _add_grasp_frame(plant: MultibodyPlant, hand: ModelInstanceIndex) -> None:
     plant.AddFrame(FixedOffsetFrame("grasp", body_frame, X_HAND_GRASP, hand))
 
 
+def cube_models(blocks: Sequence[str]) -> dict[str, str]:
+    """Which cube model (key of :data:`CUBE_COLOURS`) each block gets: in sorted order."""
+    if len(blocks) > len(CUBE_COLOURS):
+        raise InputError(
+            f"{len(blocks)} blocks, but the world has {len(CUBE_COLOURS)} cubes "
+            f"({', '.join(CUBE_COLOURS.values())}): use at most {len(CUBE_COLOURS)} blocks"
+        )
+    return dict(zip(sorted(blocks), CUBE_COLOURS, strict=False))
+
+
 def add_world(
     builder: DiagramBuilder,
     blocks: Sequence[str],
@@ -142,12 +151,7 @@ def add_world(
     joint is given (the position-control mode); the robot's own geometries never collide
     with each other.
     """
-    unknown = [b for b in blocks if b not in CUBE_COLOURS]
-    if unknown:
-        raise InputError(
-            f"block {unknown[0]!r} has no cube model; the world has cubes "
-            f"{', '.join(CUBE_COLOURS)} (at most {len(CUBE_COLOURS)} blocks)"
-        )
+    models = cube_models(blocks)
     plant_config = MultibodyPlantConfig(
         time_step=config.time_step,
         discrete_contact_approximation=config.contact_approximation,
@@ -161,8 +165,11 @@ def add_world(
     hand = plant.GetModelInstanceByName("hand")
     _add_grasp_frame(plant, hand)
     cubes = {}
-    for name in blocks:
-        (cubes[name],) = parser.AddModels(url=f"package://cake_drake/cubes/cube_{name}.sdf")
+    for name, key in models.items():
+        # Instances are named block_<name>: a block may be called "table" or "hand".
+        sdf = (MODELS_DIR / "cubes" / f"cube_{key}.sdf").read_text()
+        sdf = sdf.replace(f'<model name="cube_{key}">', f'<model name="block_{name}">')
+        (cubes[name],) = parser.AddModelsFromString(sdf, "sdf")
     for joint_name in FINGER_JOINTS:
         actuator = plant.GetJointActuatorByName(f"{joint_name}_motor", hand)
         actuator.set_controller_gains(PdControllerGains(p=config.finger_kp, d=config.finger_kd))
@@ -208,7 +215,8 @@ def _filter_cube_collisions(plant, scene_graph, cubes) -> None:
     for instance in cubes.values():
         body = plant.GetBodyByName("cube", instance)
         for gid in plant.GetCollisionGeometriesForBody(body):
-            (corners if "corner" in inspector.GetName(gid) else faces).Add(gid)
+            is_corner = inspector.GetName(gid).rsplit("::", 1)[-1].startswith("corner")
+            (corners if is_corner else faces).Add(gid)
     table = plant.GetBodyByName("table_top", plant.GetModelInstanceByName("table"))
     table_set = GeometrySet(plant.GetCollisionGeometriesForBody(table))
     manager = scene_graph.collision_filter_manager()

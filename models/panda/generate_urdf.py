@@ -92,7 +92,11 @@ def inertial(name: str) -> str:
 
 def visual(name: str, rpy: str = "0 0 0") -> str:
     mesh = VISUAL.get(name, f"{PKG}/visual/{name}.obj")
-    colour = "" if name not in VISUAL else '      <material><color rgba="0.95 0.95 0.95 1"/></material>\n'
+    colour = (
+        ""
+        if name not in VISUAL
+        else '      <material><color rgba="0.95 0.95 0.95 1"/></material>\n'
+    )
     return (
         f'    <visual>\n      <origin xyz="0 0 0" rpy="{rpy}"/>\n'
         f'      <geometry><mesh filename="{mesh}"/></geometry>\n{colour}'

@@ -1,0 +1,91 @@
+"""Plots from the loggers: joint 4's position, reference and torque, phases shaded."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from cake_drake.geometric.trajectory import PHASE_NAMES  # noqa: E402
+
+PHASE_COLOURS = {
+    "pre-grasp": "#dbe9f6",
+    "grasp": "#f6e3c5",
+    "lift": "#f8d0d0",
+    "transport": "#e3d3ef",
+    "place": "#d3ecd3",
+    "retract": "#ececec",
+}
+
+
+def phase_spans(t: np.ndarray, phase: np.ndarray) -> list[tuple[float, float, str]]:
+    """Contiguous (start, end, phase name) runs, idle left out."""
+    spans = []
+    start = 0
+    for i in range(1, len(t) + 1):
+        if i == len(t) or phase[i] != phase[start]:
+            name = PHASE_NAMES[int(phase[start])]
+            if name != "idle":
+                spans.append((float(t[start]), float(t[min(i, len(t) - 1)]), name))
+            start = i
+    return spans
+
+
+def shade_phases(ax, spans, label: bool = False) -> None:
+    for t0, t1, name in spans:
+        ax.axvspan(t0, t1, color=PHASE_COLOURS[name], lw=0, zorder=0)
+    if label:
+        from matplotlib.patches import Patch
+
+        handles = [Patch(color=c, label=n) for n, c in PHASE_COLOURS.items()]
+        ax.legend(handles=handles, loc="upper center", ncol=6, fontsize=7,
+                  bbox_to_anchor=(0.5, 1.32), frameon=False)  # fmt: skip
+
+
+def joint_plot(
+    t: np.ndarray,
+    q: np.ndarray,
+    q_d: np.ndarray,
+    tau: np.ndarray,
+    phase: np.ndarray,
+    path: str | Path,
+    joint: int = 4,
+    title: str = "",
+    tau_label: str = "τ commanded",
+    extra_tau: Sequence[tuple[np.ndarray, str]] = (),
+) -> None:
+    """Three panels for one joint (1-based): q and q_d, tracking error, torque."""
+    j = joint - 1
+    spans = phase_spans(t, phase)
+    fig, axes = plt.subplots(3, 1, figsize=(11, 7.5), sharex=True,
+                             gridspec_kw={"height_ratios": [3, 2, 3]})  # fmt: skip
+    ax = axes[0]
+    shade_phases(ax, spans, label=True)
+    ax.plot(t, q_d[:, j], color="k", lw=1.2, ls="--", label="q_d (reference)")
+    ax.plot(t, q[:, j], color="tab:blue", lw=1.0, label="q (measured)")
+    ax.set_ylabel(f"joint {joint} angle [rad]")
+    ax.legend(loc="lower right", fontsize=8)
+    ax = axes[1]
+    shade_phases(ax, spans)
+    ax.plot(t, (q[:, j] - q_d[:, j]) * 1000, color="tab:red", lw=0.9)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_ylabel("q − q_d [mrad]")
+    ax = axes[2]
+    shade_phases(ax, spans)
+    ax.plot(t, tau[:, j], color="tab:green", lw=1.0, label=tau_label)
+    for series, label in extra_tau:
+        ax.plot(t, series[:, j], lw=0.8, alpha=0.8, label=label)
+    ax.set_ylabel(f"joint {joint} torque [N·m]")
+    ax.set_xlabel("time [s]")
+    ax.legend(loc="lower right", fontsize=8)
+    if title:
+        fig.suptitle(title, y=0.995, fontsize=11)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -1,0 +1,138 @@
+"""Everything a run writes: plan, trajectory, pictures, plots and the summary."""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.math import RollPitchYaw
+
+from cake_drake.geometric.trajectory import PHASE_NAMES, save_npz
+from cake_drake.outputs.files import OutputDir
+from cake_drake.outputs.plots import joint_plot
+from cake_drake.symbolic import fact_str, write_plan
+
+
+def gravity_torques(control_plant, q: np.ndarray) -> np.ndarray:
+    """g(q) of the 7-DOF control plant at each row of ``q`` (the static torque term)."""
+    context = control_plant.CreateDefaultContext()
+    out = np.empty_like(q)
+    for i, qi in enumerate(q):
+        control_plant.SetPositions(context, qi)
+        out[i] = -control_plant.CalcGravityGeneralizedForces(context)
+    return out
+
+
+def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The reference the controller followed, sampled at the simulation step."""
+    logs = execution.logs
+    samples = {
+        "t": logs.t,
+        "q": logs.q_d,
+        "qd": logs.v_d,
+        "qdd": logs.a_d,
+        "gripper": logs.fingers_d,
+        "phase": logs.phase.astype(np.int16),
+        "action": logs.action.astype(np.int16),
+    }
+    if cake.reference is not None:
+        return samples, list(cake.reference.actions)
+    return samples, [str(a) for a in cake.plan_source.actions]
+
+
+def summary(problem, plan, cake, execution, success, message, stages) -> dict:
+    logs = execution.logs
+    blocks = {
+        name: {
+            "position": np.round(X.translation(), 5).tolist(),
+            "rpy": np.round(RollPitchYaw(X.rotation()).vector(), 5).tolist(),
+        }
+        for name, X in sorted(execution.poses.items())
+    }
+    wall = sum(stages.values())
+    return {
+        "success": success,
+        "message": message,
+        "mode": cake.config.mode,
+        "gains": {
+            "kp": np.asarray(cake.config.gains()[0]).tolist(),
+            "kd": np.asarray(cake.config.gains()[1]).tolist(),
+        }
+        if cake.config.mode == "torque"
+        else "built-in joint PD + inverse-dynamics feed-forward",
+        "ik": cake.config.ik if cake.reference is None else None,
+        "reference": str(cake.config.reference) if cake.config.reference else None,
+        "problem": problem.problem_path,
+        "goal": [fact_str(f) for f in sorted(problem.goal)],
+        "plan": [str(a) for a in plan.actions],
+        "planner": {
+            "name": plan.planner,
+            "search": plan.search,
+            "heuristic": plan.heuristic,
+            "optimal": plan.optimal,
+            "time_s": round(plan.time_s, 4),
+        },
+        "actions_done": execution.actions_done,
+        "error": execution.error,
+        "blocks": blocks,
+        "facts": [fact_str(f) for f in sorted(execution.reading.facts)],
+        "unclassified": list(execution.reading.problems),
+        "stack_offsets_mm": {k: round(v * 1000, 2) for k, v in sorted(execution.offsets.items())},
+        "sim_s": round(execution.sim_s, 3),
+        "wall_s": round(wall, 3),
+        "simulation_wall_s": round(execution.wall_s, 3),
+        "rtf": round(execution.rtf, 2),
+        "stages_s": {k: round(v, 4) for k, v in stages.items()},
+        "tracking_error": logs.tracking_error(),
+        "ik_solves": len(cake.ik.times_ms) if cake.ik else 0,
+        "ik_median_ms": round(float(np.median(cake.ik.times_ms)), 3)
+        if cake.ik and cake.ik.times_ms
+        else None,
+    }
+
+
+def write_outputs(
+    out: OutputDir,
+    problem,
+    plan,
+    cake,
+    execution,
+    success,
+    message,
+    stages,
+    worker=None,
+    meshcat=None,
+) -> None:
+    """Stage every output file in ``out`` (the caller commits or discards)."""
+    write_plan(plan, out.path("plan.txt"))
+    samples, actions = trajectory_samples(cake, execution)
+    save_npz(out.path("trajectory.npz"), samples, actions)
+    logs = execution.logs
+    tau = logs.tau_commanded if cake.config.mode == "torque" else logs.tau_applied
+    title = f"joint 4 (elbow), {cake.config.mode} mode" + (
+        f", Kp={cake.config.gains()[0][3]:g} Kd={cake.config.gains()[1][3]:g}"
+        if cake.config.mode == "torque"
+        else ""
+    )
+    gravity = gravity_torques(cake.control_plant, logs.q)
+    joint_plot(
+        logs.t,
+        logs.q,
+        logs.q_d,
+        tau,
+        logs.phase,
+        out.path("joint4_torque.png"),
+        title=title,
+        tau_label="τ commanded" if cake.config.mode == "torque" else "τ applied",
+        extra_tau=[(gravity, "g(q): static gravity term")],
+    )
+    if worker is not None:
+        worker.render(
+            execution.poses, execution.q_final, execution.fingers_final, out.path("final_state.png")
+        )
+    if meshcat is not None:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+        out.path("replay.html").write_text(meshcat.StaticHtml())
+    out.write_json(
+        "summary.json", summary(problem, plan, cake, execution, success, message, stages)
+    )
+    assert PHASE_NAMES
