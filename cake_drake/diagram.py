@@ -145,7 +145,8 @@ def build_diagram(
                 dt,
                 config.timing,
                 config.waypoints,
-            ),  # fmt: skip
+                config.world.slots,
+            ),
         )
         builder.Connect(plan_source.GetOutputPort("action"), waypoint_ik.GetInputPort("action"))
         builder.Connect(plant.get_body_poses_output_port(), waypoint_ik.GetInputPort("body_poses"))

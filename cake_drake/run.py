@@ -138,6 +138,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--time-step", type=float, default=0.01, help="simulation step, s (default: 0.01)"
     )
     p.add_argument(
+        "--slot-radius",
+        type=float,
+        default=0.55,
+        help="distance of the table slots from the robot base, m (default: 0.55); "
+        "try 1.0 to see an IK failure",
+    )
+    p.add_argument(
         "--seed", type=int, default=0, help="seed for IK restarts (runs are deterministic)"
     )
     p.add_argument(
@@ -157,6 +164,8 @@ def _gains(values: list[float], flag: str) -> float | list[float]:
 def make_config(args: argparse.Namespace) -> RunConfig:
     from cake_drake.world.scene import WorldConfig
 
+    if not 0.2 <= args.slot_radius <= 2.0:
+        raise InputError(f"--slot-radius {args.slot_radius} is outside 0.2 to 2.0 m")
     if not 0.0005 <= args.time_step <= 0.02:
         raise InputError(f"--time-step {args.time_step} is outside 0.0005 to 0.02 s")
     config = RunConfig(
@@ -165,7 +174,7 @@ def make_config(args: argparse.Namespace) -> RunConfig:
         kd=_gains(args.kd, "--kd"),
         ik=args.ik,
         seed=args.seed,
-        world=WorldConfig(time_step=args.time_step),
+        world=WorldConfig(time_step=args.time_step, slot_radius=args.slot_radius),
         reference=args.reference,
         differentiate=args.differentiate,
     )
@@ -240,7 +249,7 @@ def run(args: argparse.Namespace) -> RunResult:
     t = time.perf_counter()
     problem = load_world_problem(args.domain, args.problem)
     blocks = sorted(problem.objects)
-    initial = layout(towers(problem.init))
+    initial = layout(towers(problem.init), config.world.slots)
     worker = None
     if not args.no_render:
         from cake_drake.outputs.render_worker import RenderWorker
@@ -310,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     rate = f"{e.sim_s:.1f} s simulated in {e.wall_s:.2f} s (RTF {e.rtf:.1f})"
     where = f"outputs in {args.out}/"
     if result.success:
-        print(f"tower built: {tower_text(e)} — {rate}; {where}")
+        print(f"goal reached: {tower_text(e)} — {rate}; {where}")
         return EXIT_OK
     print(f"error: plan not executed: {result.message} — {rate}; {where}", file=sys.stderr)
     return EXIT_EXECUTION_FAILED

@@ -65,6 +65,7 @@ class WorldView:
     cube_poses: Mapping[str, RigidTransform]
     X_WG: RigidTransform  # current gripper (grasp frame) pose
     held: str | None = None  # name of the cube in the hand, if any
+    slots: tuple[tuple[float, float], ...] = SLOTS  # table slots (x, y) for put-down
 
 
 def gripper_down(yaw: float) -> RotationMatrix:
@@ -91,10 +92,13 @@ def _transit_height(
 
 
 def free_slot(
-    poses: Mapping[str, RigidTransform], held: str | None, params: WaypointParams
+    poses: Mapping[str, RigidTransform],
+    held: str | None,
+    params: WaypointParams,
+    slots: Sequence[tuple[float, float]] = SLOTS,
 ) -> tuple[float, float]:
     """The first table slot with no cube near it (the held cube does not count)."""
-    for x, y in SLOTS:
+    for x, y in slots:
         if all(
             np.hypot(X.translation()[0] - x, X.translation()[1] - y) > params.slot_clearance
             for n, X in poses.items()
@@ -132,7 +136,7 @@ def waypoints_for(
             target = X_WS.translation() + [0, 0, CUBE_SIZE + params.place_drop]
             target_yaw = _yaw(X_WS)
         else:
-            x, y = free_slot(poses, block, params)
+            x, y = free_slot(poses, block, params, world.slots)
             target = np.array([x, y, CUBE_SIZE / 2 + params.place_drop])
             target_yaw = math.atan2(y, x)
         # Where the cube sits in the hand, measured now: X_GB = X_WG^-1 X_WB.

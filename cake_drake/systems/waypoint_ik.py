@@ -16,6 +16,7 @@ from cake_drake.geometric.solve import solve_action
 from cake_drake.geometric.trajectory import JointTrajectory, Timing
 from cake_drake.geometric.waypoints import PICK_ACTIONS, WaypointParams, WorldView
 from cake_drake.systems.plan_source import ActionCommand
+from cake_drake.world.scene import SLOTS
 
 #: Layout of the ``reference`` output vector.
 REFERENCE_SLICES = {
@@ -73,8 +74,10 @@ class WaypointIk(LeafSystem):
         period: float,
         timing: Timing = Timing(),
         params: WaypointParams = WaypointParams(),
+        slots: tuple[tuple[float, float], ...] = SLOTS,
     ) -> None:
         super().__init__()
+        self._slots = tuple(slots)
         self._ik = ik
         self._cubes = dict(cube_bodies)
         self._hand = int(hand_body)
@@ -106,7 +109,7 @@ class WaypointIk(LeafSystem):
     def _world(self, context, held: str | None) -> WorldView:
         poses = self._poses_port.Eval(context)
         cubes = {name: poses[i] for name, i in self._cubes.items()}
-        return WorldView(cubes, poses[self._hand] @ self._X_HG, held)
+        return WorldView(cubes, poses[self._hand] @ self._X_HG, held, self._slots)
 
     def _update(self, context, state) -> None:
         prog: Progress = context.get_abstract_state(self._state_index).get_value()

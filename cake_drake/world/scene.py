@@ -56,19 +56,23 @@ SCENE_DIRECTIVES = "package://cake_drake/scene/panda_on_table.dmd.yaml"
 CONTROL_DIRECTIVES = "package://cake_drake/scene/panda_control.dmd.yaml"
 
 
-def _slots() -> tuple[tuple[float, float], ...]:
-    """Eight table slots on an arc of radius 0.55 m in front of the robot, 15 deg apart.
+SLOT_RADIUS = 0.55  # m from the robot base: where the Panda is dexterous pointing down
+
+
+def make_slots(radius: float = SLOT_RADIUS) -> tuple[tuple[float, float], ...]:
+    """Eight table slots on an arc of ``radius`` in front of the robot, 15 deg apart.
 
     Ordered centre-out (right of centre first), so that a few towers stand where the
     arm is most dexterous and the camera sees them all.
     """
     angles = [-7.5, 7.5, -22.5, 22.5, -37.5, 37.5, -52.5, 52.5]
-    r = 0.55
-    return tuple((r * math.cos(math.radians(a)), r * math.sin(math.radians(a))) for a in angles)
+    return tuple(
+        (radius * math.cos(math.radians(a)), radius * math.sin(math.radians(a))) for a in angles
+    )
 
 
 #: (x, y) of each table slot, in the order towers are assigned to them.
-SLOTS: tuple[tuple[float, float], ...] = _slots()
+SLOTS: tuple[tuple[float, float], ...] = make_slots()
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,11 @@ class WorldConfig:
     contact_approximation: str = "sap"  # "lagged" (Drake's default) lets a tower slide apart
     finger_kp: float = 1000.0  # N/m; with the fingers commanded shut this squeezes ~20 N
     finger_kd: float = 20.0  # N s/m
+    slot_radius: float = SLOT_RADIUS  # m: table slots on this arc around the base
+
+    @property
+    def slots(self) -> tuple[tuple[float, float], ...]:
+        return make_slots(self.slot_radius)
 
 
 @dataclass
@@ -239,14 +248,16 @@ def make_control_plant(time_step: float = 0.0) -> MultibodyPlant:
 # --- cube placement ------------------------------------------------------------------
 
 
-def layout(towers: Sequence[Sequence[str]]) -> dict[str, RigidTransform]:
+def layout(
+    towers: Sequence[Sequence[str]], slots: Sequence[tuple[float, float]] = SLOTS
+) -> dict[str, RigidTransform]:
     """World poses ``X_WB`` of every cube for towers given bottom to top, one slot each."""
-    if len(towers) > len(SLOTS):
+    if len(towers) > len(slots):
         raise InputError(
-            f"{len(towers)} towers need more table slots than the world has ({len(SLOTS)})"
+            f"{len(towers)} towers need more table slots than the world has ({len(slots)})"
         )
     poses = {}
-    for (x, y), tower in zip(SLOTS, towers, strict=False):
+    for (x, y), tower in zip(slots, towers, strict=False):
         yaw = math.atan2(y, x)  # cube faces towards the robot
         for level, name in enumerate(tower):
             z = CUBE_SIZE / 2 + level * CUBE_SIZE
