@@ -200,17 +200,22 @@ def load_world_problem(domain: Path, problem_path: Path) -> Problem:
     return problem
 
 
-def get_plan(args: argparse.Namespace, problem: Problem) -> Plan:
-    if args.plan is None:
-        plan = solve_problem(problem, args.planner, args.time_limit)
-        return plan
-    actions = read_plan(args.plan)
+def get_plan(
+    problem: Problem,
+    planner: str = DEFAULT_PLANNER,
+    plan_path: Path | None = None,
+    time_limit: float | None = None,
+) -> Plan:
+    """Plan with ``planner``, or read and validate the plan file ``plan_path``."""
+    if plan_path is None:
+        return solve_problem(problem, planner, time_limit)
+    actions = read_plan(plan_path)
     check = validate_plan(problem, actions)
     if not check.ok:
         raise NoPlanError(
-            f"{args.plan}: not a valid plan for {problem.problem_path}: {check.message}"
+            f"{plan_path}: not a valid plan for {problem.problem_path}: {check.message}"
         )
-    return Plan(actions, f"file {args.plan}", "-", "-", 0.0, False)
+    return Plan(actions, f"file {plan_path}", "-", "-", 0.0, False)
 
 
 def verdict(problem: Problem, execution: Execution) -> tuple[bool, list[str], str]:
@@ -243,22 +248,38 @@ def tower_text(execution: Execution) -> str:
     return f"{'; '.join(lines) or 'no tower'} (largest xy offset {worst:.1f} mm)"
 
 
-def run(args: argparse.Namespace) -> RunResult:
+def run(
+    config: RunConfig,
+    problem_path: Path = PROBLEM_5,
+    domain_path: Path = BLOCKSWORLD_DOMAIN,
+    planner: str = DEFAULT_PLANNER,
+    plan_path: Path | None = None,
+    time_limit: float | None = None,
+    out: Path | None = Path("outputs"),
+    render: bool = True,
+    quiet: bool = True,
+    meshcat=None,
+) -> RunResult:
+    """The whole pipeline: problem -> plan -> Diagram -> simulation -> verdict -> outputs.
+
+    ``out=None`` writes nothing (for notebooks and studies); ``meshcat`` is an optional
+    ``pydrake.geometry.Meshcat`` to watch (and record to ``replay.html``).
+    """
     stages: dict[str, float] = {"import": time.perf_counter() - _T_START}
-    config = make_config(args)
+    config.check()
     t = time.perf_counter()
-    problem = load_world_problem(args.domain, args.problem)
+    problem = load_world_problem(domain_path, problem_path)
     blocks = sorted(problem.objects)
     initial = layout(towers(problem.init), config.world.slots)
     worker = None
-    if not args.no_render:
+    if render and out is not None:
         from cake_drake.outputs.render_worker import RenderWorker
 
         worker = RenderWorker(blocks, initial)
     try:
-        plan = get_plan(args, problem)
+        plan = get_plan(problem, planner, plan_path, time_limit)
         stages["planning"] = time.perf_counter() - t
-        if not args.quiet and args.plan is None:
+        if not quiet and plan_path is None:
             print(plan.note(), file=sys.stderr)
             if (
                 problem.problem_path.endswith("problem_5.pddl")
@@ -266,22 +287,17 @@ def run(args: argparse.Namespace) -> RunResult:
             ):
                 print(
                     f"note: problem_5's optimal plan has {PROBLEM_5_OPTIMAL_LENGTH} actions; "
-                    f"{args.planner} is satisficing",
+                    f"{planner} is satisficing",
                     file=sys.stderr,
                 )
 
         t = time.perf_counter()
-        meshcat = None
-        if args.meshcat:
-            from pydrake.geometry import StartMeshcat
-
-            meshcat = StartMeshcat()
         cake = build_diagram(config, blocks, initial, plan.actions, meshcat=meshcat)
         stages["diagram_build"] = time.perf_counter() - t
 
         n = plan.length if config.reference is None else len(cake.reference.actions)
         progress = Progress(
-            n, lambda k: f"({plan.actions[k]})" if k < plan.length else "", enabled=not args.quiet
+            n, lambda k: f"({plan.actions[k]})" if k < plan.length else "", enabled=not quiet
         )
         if meshcat is not None:
             meshcat.StartRecording()
@@ -290,22 +306,24 @@ def run(args: argparse.Namespace) -> RunResult:
         if cake.ik is not None:
             stages["ik"] = sum(cake.ik.times_ms) / 1000
         success, unmet, message = verdict(problem, execution)
+        result = RunResult(success, message, plan, execution, cake, stages, [], unmet)
+        if out is None:
+            return result
 
         from cake_drake.outputs.files import OutputDir
         from cake_drake.outputs.report import write_outputs
 
-        out = OutputDir(args.out)
+        staged = OutputDir(out)
         try:
             t = time.perf_counter()
             write_outputs(
-                out, problem, plan, cake, execution, success, message, stages, worker, meshcat
+                staged, problem, plan, cake, execution, success, message, stages, worker, meshcat
             )
-            written = out.commit()
+            result.written = staged.commit()
         except BaseException:
-            out.discard()
+            staged.discard()
             raise
         stages["outputs"] = time.perf_counter() - t
-        result = RunResult(success, message, plan, execution, cake, stages, written, unmet)
         return result
     finally:
         if worker is not None:
@@ -314,7 +332,23 @@ def run(args: argparse.Namespace) -> RunResult:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    result = run(args)
+    meshcat = None
+    if args.meshcat:
+        from pydrake.geometry import StartMeshcat
+
+        meshcat = StartMeshcat()
+    result = run(
+        make_config(args),
+        problem_path=args.problem,
+        domain_path=args.domain,
+        planner=args.planner,
+        plan_path=args.plan,
+        time_limit=args.time_limit,
+        out=args.out,
+        render=not args.no_render,
+        quiet=args.quiet,
+        meshcat=meshcat,
+    )
     e = result.execution
     rate = f"{e.sim_s:.1f} s simulated in {e.wall_s:.2f} s (RTF {e.rtf:.1f})"
     where = f"outputs in {args.out}/"
