@@ -35,8 +35,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--kd", type=float, nargs="+", default=[20.0, 5.0], help="Kd values (1/s)")
     p.add_argument("--kp", type=float, default=100.0, help="Kp for every run (1/s^2)")
-    p.add_argument("--reference", type=Path, default=None,
-                   help="trajectory.npz to replay (default: record one in position mode)")  # fmt: skip
+    p.add_argument(
+        "--reference",
+        type=Path,
+        default=None,
+        help="trajectory.npz to replay (default: record one in position mode)",
+    )
     p.add_argument("--differentiate", choices=("spline", "central"), default="spline")
     p.add_argument("--out", type=Path, default=Path("outputs"), help="output folder")
     p.add_argument("--quiet", action="store_true")
