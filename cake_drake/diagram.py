@@ -214,5 +214,15 @@ def build_diagram(
         visualizer = meshcat
     diagram = builder.Build()
     diagram.set_name("cake_drake")
-    return CakeDiagram(diagram, scene, config, loggers, plan_source, waypoint_ik, reference,
-                       control_plant, solver, visualizer)  # fmt: skip
+    return CakeDiagram(
+        diagram,
+        scene,
+        config,
+        loggers,
+        plan_source,
+        waypoint_ik,
+        reference,
+        control_plant,
+        solver,
+        visualizer,
+    )

@@ -77,11 +77,17 @@ def _logs(cake: CakeDiagram, context) -> Logs:
     s, r = state.data()[:, :n], ref.data()[:, :n]
     return Logs(
         t=state.sample_times()[:n],
-        q=s[:7].T, v=s[7:14].T, q_d=r[:7].T, v_d=r[7:14].T, a_d=r[14:21].T,
-        fingers_d=r[21], phase=r[26].round().astype(int), action=r[27].round().astype(int),
+        q=s[:7].T,
+        v=s[7:14].T,
+        q_d=r[:7].T,
+        v_d=r[7:14].T,
+        a_d=r[14:21].T,
+        fingers_d=r[21],
+        phase=r[26].round().astype(int),
+        action=r[27].round().astype(int),
         tau_commanded=log("tau_commanded").data()[:, :n].T,
         tau_applied=log("tau_applied").data()[:, :n].T,
-    )  # fmt: skip
+    )
 
 
 class Progress:

@@ -66,27 +66,37 @@ def study(
             raise ExecutionError(f"recording the reference failed: {recorded.message}")
         reference = workdir / "reference" / "trajectory.npz"
     results: dict[float, RunResult] = {}
-    table: dict = {"kp": kp, "reference": str(reference), "differentiate": differentiate,
-                   "runs": []}  # fmt: skip
+    table: dict = {
+        "kp": kp,
+        "reference": str(reference),
+        "differentiate": differentiate,
+        "runs": [],
+    }
     for kd in kds:
-        config = RunConfig(mode="torque", kp=kp, kd=kd, reference=reference,
-                           differentiate=differentiate)  # fmt: skip
+        config = RunConfig(
+            mode="torque", kp=kp, kd=kd, reference=reference, differentiate=differentiate
+        )
         result = run(config, out=None)
         results[kd] = result
         logs = result.execution.logs
         err = logs.q - logs.q_d
         s = settling(logs.t, logs.q, logs.q_d, logs.v_d)
-        table["runs"].append({
-            "kd": kd,
-            "rms_tracking_error": np.sqrt(np.mean(err**2, axis=0)).round(7).tolist(),
-            "max_tracking_error": np.max(np.abs(err), axis=0).round(7).tolist(),
-            "settling_threshold_rad": s.threshold,
-            "settling_time_s": {"median": round(s.median, 3), "max": round(s.worst, 3),
-                                "per_waypoint": [round(x, 3) for x in s.times],
-                                "never_settled": int(sum(not ok for ok in s.settled))},
-            "tower_built": result.success,
-            "message": result.message,
-        })  # fmt: skip
+        table["runs"].append(
+            {
+                "kd": kd,
+                "rms_tracking_error": np.sqrt(np.mean(err**2, axis=0)).round(7).tolist(),
+                "max_tracking_error": np.max(np.abs(err), axis=0).round(7).tolist(),
+                "settling_threshold_rad": s.threshold,
+                "settling_time_s": {
+                    "median": round(s.median, 3),
+                    "max": round(s.worst, 3),
+                    "per_waypoint": [round(x, 3) for x in s.times],
+                    "never_settled": int(sum(not ok for ok in s.settled)),
+                },
+                "tower_built": result.success,
+                "message": result.message,
+            }
+        )
     return table, results
 
 
@@ -122,9 +132,11 @@ def comparison_plot(results: dict[float, RunResult], path: Path, joint: int = 4)
 
 
 def format_table(table: dict) -> str:
-    lines = [f"Kp = {table['kp']:g}; reference {table['reference']}",
-             f"{'Kd':>6} {'RMS err j4 [mrad]':>18} {'max err j4 [mrad]':>18} "
-             f"{'max err all [mrad]':>19} {'settle median/max [s]':>22} {'tower':>6}"]  # fmt: skip
+    lines = [
+        f"Kp = {table['kp']:g}; reference {table['reference']}",
+        f"{'Kd':>6} {'RMS err j4 [mrad]':>18} {'max err j4 [mrad]':>18} "
+        f"{'max err all [mrad]':>19} {'settle median/max [s]':>22} {'tower':>6}",
+    ]
     for r in table["runs"]:
         st = r["settling_time_s"]
         lines.append(

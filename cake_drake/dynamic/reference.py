@@ -61,20 +61,35 @@ class ReferenceTrajectory:
         phase = data.get("phase", np.zeros(n, int))
         action = data.get("action", -np.ones(n, int))
         return cls(
-            t, q, qd, qdd, data["gripper"].astype(float), phase, action,
+            t,
+            q,
+            qd,
+            qdd,
+            data["gripper"].astype(float),
+            phase,
+            action,
             tuple(str(s) for s in data.get("phases", ())),
             tuple(str(s) for s in data.get("actions", ())),
-        )  # fmt: skip
+        )
 
     def matrix(self) -> np.ndarray:
         """The 28 x N reference: q, v, a, finger state, done (0), phase, action."""
         n = len(self.t)
         g = self.gripper.reshape(n)
-        return np.vstack([
-            self.q.T, self.qd.T, self.qdd.T,
-            g, g, np.zeros(n), np.zeros(n), np.zeros(n),
-            self.phase.astype(float), self.action.astype(float),
-        ])  # fmt: skip
+        return np.vstack(
+            [
+                self.q.T,
+                self.qd.T,
+                self.qdd.T,
+                g,
+                g,
+                np.zeros(n),
+                np.zeros(n),
+                np.zeros(n),
+                self.phase.astype(float),
+                self.action.astype(float),
+            ]
+        )
 
     def make_source(self) -> TrajectorySource:
         """Drake's ``TrajectorySource`` over a first-order hold of :meth:`matrix`."""

@@ -103,8 +103,16 @@ class JointTrajectory:
         return self.segments[-1].gripper if self.segments else GRIPPER_OPEN
 
     def _append(self, duration, q1, phase, action, gripper) -> None:
-        seg = Segment(self.end_time, duration, self.end_q, np.asarray(q1, float),
-                      PHASE_NAMES.index(phase), action, gripper, self.end_gripper)  # fmt: skip
+        seg = Segment(
+            self.end_time,
+            duration,
+            self.end_q,
+            np.asarray(q1, float),
+            PHASE_NAMES.index(phase),
+            action,
+            gripper,
+            self.end_gripper,
+        )
         self.segments.append(seg)
         self._starts.append(seg.t0)
 

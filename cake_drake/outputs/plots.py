@@ -43,8 +43,14 @@ def shade_phases(ax, spans, label: bool = False) -> None:
         from matplotlib.patches import Patch
 
         handles = [Patch(color=c, label=n) for n, c in PHASE_COLOURS.items()]
-        ax.legend(handles=handles, loc="upper center", ncol=6, fontsize=7,
-                  bbox_to_anchor=(0.5, 1.32), frameon=False)  # fmt: skip
+        ax.legend(
+            handles=handles,
+            loc="upper center",
+            ncol=6,
+            fontsize=7,
+            bbox_to_anchor=(0.5, 1.32),
+            frameon=False,
+        )
 
 
 def joint_plot(
@@ -62,8 +68,9 @@ def joint_plot(
     """Three panels for one joint (1-based): q and q_d, tracking error, torque."""
     j = joint - 1
     spans = phase_spans(t, phase)
-    fig, axes = plt.subplots(3, 1, figsize=(11, 7.5), sharex=True,
-                             gridspec_kw={"height_ratios": [3, 2, 3]})  # fmt: skip
+    fig, axes = plt.subplots(
+        3, 1, figsize=(11, 7.5), sharex=True, gridspec_kw={"height_ratios": [3, 2, 3]}
+    )
     ax = axes[0]
     shade_phases(ax, spans, label=True)
     ax.plot(t, q_d[:, j], color="k", lw=1.2, ls="--", label="q_d (reference)")

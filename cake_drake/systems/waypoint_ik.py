@@ -130,9 +130,14 @@ class WaypointIk(LeafSystem):
         held = cmd.action.args[0] if cmd.action.name in PICK_ACTIONS else None
         try:
             solve_action(
-                cmd.action, cmd.index, self._world(context, prog.held), self._ik, traj,
-                self._timing, self._params,
-            )  # fmt: skip
+                cmd.action,
+                cmd.index,
+                self._world(context, prog.held),
+                self._ik,
+                traj,
+                self._timing,
+                self._params,
+            )
             new = Progress(traj, cmd.index, prog.done, held)
         except ExecutionError as e:
             new = Progress(prog.trajectory, -1, prog.done, prog.held, str(e))
