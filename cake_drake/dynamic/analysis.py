@@ -6,8 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: The reference counts as still when every joint's desired speed is below this (rad/s).
-STILL_SPEED = 1e-6
+#: The reference counts as still when every joint's desired speed is below this (rad/s);
+#: a spline fitted through recorded samples is never exactly still.
+STILL_SPEED = 1e-3
 
 
 def arrivals(t: np.ndarray, v_d: np.ndarray) -> list[tuple[int, int]]:

@@ -36,18 +36,27 @@ _A_PEAK = 10.0 / np.sqrt(3.0)  # quintic: peak of |d2s/dtau2|
 
 @dataclass(frozen=True)
 class Timing:
-    """How fast the arm may move."""
+    """How fast the arm may move.
+
+    Free-space moves (pre-grasp, lift, transport) use ``velocity_fraction`` and
+    ``acceleration_fraction`` of the datasheet limits; the moves that start or end
+    beside a cube or a tower (grasp, place, retract) are ``gentle`` times that, so an
+    overshoot there stays small.
+    """
 
     velocity_fraction: float = 0.8
     acceleration_fraction: float = 0.7
+    gentle: float = 0.5
+    gentle_phases: tuple[str, ...] = ("grasp", "place", "retract")
     min_move: float = 0.2  # s, shortest move
     gripper_time: float = 0.3  # s, a close or an open
     settle_time: float = 0.1  # s, still before the fingers close or open
 
-    def move_duration(self, q0: np.ndarray, q1: np.ndarray) -> float:
+    def move_duration(self, q0: np.ndarray, q1: np.ndarray, phase: str = "transport") -> float:
+        scale = self.gentle if phase in self.gentle_phases else 1.0
         d = np.abs(np.asarray(q1) - np.asarray(q0))
-        t_v = _V_PEAK * d / (self.velocity_fraction * PANDA_VELOCITY)
-        t_a = np.sqrt(_A_PEAK * d / (self.acceleration_fraction * PANDA_ACCELERATION))
+        t_v = _V_PEAK * d / (scale * self.velocity_fraction * PANDA_VELOCITY)
+        t_a = np.sqrt(_A_PEAK * d / (scale * self.acceleration_fraction * PANDA_ACCELERATION))
         return float(max(self.min_move, t_v.max(), t_a.max()))
 
 
@@ -118,7 +127,9 @@ class JointTrajectory:
 
     def move(self, q1, phase: str, action: int, timing: Timing) -> None:
         """Quintic move from the current end to ``q1``; the gripper keeps its command."""
-        self._append(timing.move_duration(self.end_q, q1), q1, phase, action, self.end_gripper)
+        self._append(
+            timing.move_duration(self.end_q, q1, phase), q1, phase, action, self.end_gripper
+        )
 
     def hold(self, duration: float, phase: str, action: int, gripper: float | None = None) -> None:
         """Stay still for ``duration``; the finger command ramps to ``gripper`` meanwhile.

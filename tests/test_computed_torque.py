@@ -1,0 +1,111 @@
+"""Exercise 4.x.3's claims, checked from the logs of real replays through IDC."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cake_drake.dynamic.analysis import settling, stationary_samples
+from cake_drake.gains import study
+from cake_drake.geometric.trajectory import PHASE_NAMES
+from cake_drake.outputs.report import gravity_torques
+
+pytestmark = pytest.mark.slow
+J4 = 3  # joint 4, zero-based
+
+
+@pytest.fixture(scope="module")
+def replays(position_run):
+    out, _ = position_run
+    table, results = study([20.0, 5.0], kp=100.0, reference=out / "trajectory.npz")
+    return table, results
+
+
+def test_replay_builds_the_tower(replays):
+    table, results = replays
+    assert results[20.0].success, results[20.0].message
+    assert table["runs"][0]["tower_built"] is True
+
+
+def test_static_torque_is_the_gravity_term(replays):
+    _, results = replays
+    r = results[20.0]
+    logs = r.execution.logs
+    still = stationary_samples(logs.v, logs.v_d)
+    assert still.sum() > 50
+    g = gravity_torques(r.cake.control_plant, logs.q[still])[:, J4]
+    tau = logs.tau_commanded[still, J4]
+    assert np.all(np.abs(g) > 1.0), "joint 4 carries a gravity load whenever the arm is still"
+    rel = np.abs(tau - g) / np.abs(g)
+    assert np.median(rel) < 0.01
+    assert np.all(rel < 0.05), f"worst still sample differs from g(q) by {rel.max():.1%}"
+
+
+def test_dynamic_torque_peaks_fall_in_lift_and_transport(replays):
+    _, results = replays
+    r = results[20.0]
+    logs = r.execution.logs
+    g = gravity_torques(r.cake.control_plant, logs.q)[:, J4]
+    dynamic = np.abs(logs.tau_commanded[:, J4] - g)
+    top = np.argsort(dynamic)[-10:]
+    phases = {PHASE_NAMES[logs.phase[i]] for i in top}
+    assert phases <= {"lift", "transport"}, phases
+
+
+def test_lower_kd_tracks_worse(replays):
+    table, _ = replays
+    kd20, kd5 = table["runs"]
+    assert kd5["rms_tracking_error"][J4] > 1.2 * kd20["rms_tracking_error"][J4]
+    assert max(kd5["max_tracking_error"]) > max(kd20["max_tracking_error"])
+
+
+def test_overshoot_decays_within_half_a_second_at_kd_20(replays):
+    _, results = replays
+    logs = results[20.0].execution.logs
+    s = settling(logs.t, logs.q, logs.q_d, logs.v_d)
+    assert len(s.times) >= 30  # every waypoint of the ten actions
+    assert s.worst < 0.5, f"slowest settling {s.worst:.2f} s"
+
+
+def test_gains_cli_writes_plot_and_table(position_run, tmp_path):
+    out, _ = position_run
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "cake_drake.gains",
+            "--kd",
+            "20",
+            "5",
+            "--reference",
+            str(out / "trajectory.npz"),
+            "--out",
+            str(tmp_path),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    data = json.loads((tmp_path / "gains.json").read_text())
+    assert [run["kd"] for run in data["runs"]] == [20.0, 5.0]
+    assert len(data["runs"][0]["rms_tracking_error"]) == 7
+    assert (tmp_path / "kd_comparison.png").stat().st_size > 10_000
+    assert "Kd" in r.stdout
+
+
+def test_gains_cli_bad_reference_is_one_line(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.gains", "--reference", str(bad), "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 2
+    assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1
+    assert not (tmp_path / "gains.json").exists()

@@ -1,0 +1,139 @@
+"""End-to-end: the whole cake on the simulated Panda, verdicts measured from poses."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from cake_drake.diagram import RunConfig
+from cake_drake.geometric.trajectory import load_npz
+from cake_drake.run import run
+from cake_drake.symbolic import random_problem
+
+pytestmark = pytest.mark.slow
+OUTPUTS = {"plan.txt", "trajectory.npz", "final_state.png", "joint4_torque.png", "summary.json"}
+
+
+def cli(*args, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--quiet", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+    )
+
+
+def assert_tower(summary: dict, goal_on: list[tuple[str, str]]) -> None:
+    """Check the stacking independently of the run's own verdict, from the saved poses."""
+    blocks = {k: np.array(v["position"]) for k, v in summary["blocks"].items()}
+    for top, below in goal_on:
+        dz = blocks[top][2] - blocks[below][2]
+        dxy = np.linalg.norm(blocks[top][:2] - blocks[below][:2])
+        assert abs(dz - 0.04) < 0.004, f"{top} is {dz * 1000:.1f} mm above {below}"
+        assert dxy < 0.005, f"{top} stands {dxy * 1000:.1f} mm off {below}"
+
+
+def test_torque_mode_builds_the_tower_and_writes_every_output(tmp_path):
+    r = cli("--mode", "torque", "--out", str(tmp_path))
+    assert r.returncode == 0, r.stderr
+    assert "goal reached: a on b on c on d on e" in r.stdout
+    assert OUTPUTS <= {p.name for p in tmp_path.iterdir()}
+    assert not any(p.name.startswith(".staging") for p in tmp_path.iterdir())
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["success"] is True and summary["mode"] == "torque"
+    assert len(summary["plan"]) == 10
+    assert_tower(summary, [("a", "b"), ("b", "c"), ("c", "d"), ("d", "e")])
+    assert abs(summary["blocks"]["e"]["position"][2] - 0.02) < 0.002  # e on the table
+    assert "(on a b)" in summary["facts"] and "(on-table e)" in summary["facts"]
+    plan = (tmp_path / "plan.txt").read_text()
+    assert plan.startswith("(unstack a b)") and "; cost = 10 (unit cost)" in plan
+    traj = load_npz(tmp_path / "trajectory.npz")
+    assert traj["q"].shape[1] == 7 and len(traj["actions"]) == 10
+    assert set(np.unique(traj["phase"])) >= {1, 2, 3, 4, 5, 6}
+
+
+def test_replay_of_a_saved_trajectory_in_torque_mode(position_run, tmp_path):
+    out, _ = position_run
+    r = cli(
+        "--mode",
+        "torque",
+        "--reference",
+        str(out / "trajectory.npz"),
+        "--differentiate",
+        "central",
+        "--out",
+        str(tmp_path),
+        "--no-render",
+    )
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["reference"].endswith("trajectory.npz")
+    assert_tower(summary, [("a", "b"), ("b", "c"), ("c", "d"), ("d", "e")])
+
+
+@pytest.mark.parametrize("mode", ["position", "torque"])
+def test_a_generated_three_block_problem(mode, tmp_path):
+    problem = tmp_path / "p3.pddl"
+    problem.write_text(random_problem(3, seed=4))
+    result = run(RunConfig(mode=mode), problem_path=problem, out=None)
+    assert result.success, result.message
+    from cake_drake.symbolic import BLOCKSWORLD_DOMAIN, load_problem
+
+    goal = load_problem(BLOCKSWORLD_DOMAIN, problem).goal
+    assert goal <= result.execution.reading.facts
+
+
+def test_same_inputs_same_plan_and_trajectory():
+    a = run(RunConfig(mode="torque"), out=None)
+    b = run(RunConfig(mode="torque"), out=None)
+    assert a.plan.actions == b.plan.actions
+    np.testing.assert_array_equal(a.execution.logs.q_d, b.execution.logs.q_d)
+    np.testing.assert_array_equal(a.execution.logs.q, b.execution.logs.q)
+
+
+def test_unreachable_cube_is_exit_3_naming_the_action(tmp_path):
+    r = cli("--slot-radius", "1.0", "--out", str(tmp_path), "--no-render")
+    assert r.returncode == 3
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    assert "action 1 (unstack a b)" in r.stderr and "pre-grasp" in r.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["success"] is False and "unstack a b" in summary["error"]
+
+
+@pytest.mark.parametrize(
+    "args, code, words",
+    [
+        (["--problem", "/no/such.pddl"], 2, "no such"),
+        (["--planner", "nope"], 2, "nope"),
+        (["--kp", "1", "2", "3"], 2, "one value or seven"),
+        (["--ik", "trac"], 2, "drake"),
+        (["--mode", "position", "--reference", "x.npz"], 2, "--mode torque"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, code, words):
+    out = tmp_path / "out"
+    r = cli(*args, "--out", str(out), cwd=tmp_path)
+    assert r.returncode == code, r.stderr
+    assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
+    assert words in r.stderr
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_bad_reference_file_is_one_line(tmp_path):
+    bad = tmp_path / "t.npz"
+    np.savez(bad, t=np.arange(5.0), q=np.zeros((5, 6)), gripper=np.zeros(5))
+    r = cli("--reference", str(bad), "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and "expected (N, 7)" in r.stderr
+    assert r.stderr.count("\n") == 1
+
+
+def test_invalid_plan_file_is_exit_1(tmp_path):
+    plan = tmp_path / "plan.txt"
+    plan.write_text("(unstack a b)\n(stack a c)\n")
+    r = cli("--plan", str(plan), "--out", str(tmp_path / "o"))
+    assert r.returncode == 1
+    assert "step 2" in r.stderr and r.stderr.count("\n") == 1
