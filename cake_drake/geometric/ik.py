@@ -3,19 +3,23 @@
 An :class:`IkSolver` maps a desired grasp-frame pose ``X_WG`` and a seed configuration to
 7 arm joint angles, or ``None``. Two solvers ship:
 
-* :class:`DrakeIk` - Drake's ``InverseKinematics`` (position and orientation constraints,
-  joint limits, a cost to stay near the seed), solved by Drake's default solver (SNOPT),
-  retried from further seeds, every answer checked against forward kinematics. A few
-  Gauss-Newton steps go first from the seed: they solve nearly every tabletop pose in
-  well under a millisecond, and ``InverseKinematics`` handles what they cannot.
+* :class:`DrakeIk` - Newton steps on Drake's kinematics from the seed, then from the
+  nearest configurations of a precomputed table, then Drake's ``InverseKinematics``
+  (position and orientation constraints, joint limits, a cost to stay near the seed,
+  solved by SNOPT) as the constrained fallback. Every answer is checked against forward
+  kinematics. Deterministic: the same query gives the same answer.
 * :class:`DlsIk` - the exercise's damped least squares (damping 0.05, at most 200
   iterations) on Drake's Jacobian.
 
-Both work on the 7-DOF control plant (:func:`cake_drake.world.scene.make_control_plant`).
+Both work on the 7-DOF control plant (:func:`cake_drake.world.scene.make_control_plant`)
+and take their tolerances as constructor arguments (defaults :data:`POSITION_TOL` and
+:data:`ORIENTATION_TOL`, which the pipeline uses; ``benchmarks/ik.py`` runs the TRAC-IK
+protocol at 1e-5). Measured numbers are in ``docs/ik.md``.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -26,11 +30,16 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import Solve
 
+from cake_drake.errors import InputError
 from cake_drake.world.scene import Q_HOME, make_control_plant
 
-#: Tolerances every solution is checked against, whatever the solver.
+#: Default tolerances every solution is checked against, whatever the solver.
 POSITION_TOL = 1e-4  # m
 ORIENTATION_TOL = 1e-3  # rad
+
+_I6 = np.eye(6)
+_TABLE_STREAM = 0x7AB1E
+_ZERO3 = np.zeros(3)
 
 
 class IkSolver(Protocol):
@@ -45,9 +54,11 @@ class IkSolver(Protocol):
 
 @dataclass(frozen=True)
 class IkStats:
-    iterations: int
-    position_error: float
-    orientation_error: float
+    """How the last :meth:`DrakeIk.solve` went: which stage answered and at what cost."""
+
+    stage: str  # "seed", "table", "snopt" or "failed"
+    iterations: int  # Newton iterations, all stages together
+    programs: int  # InverseKinematics programs solved
 
 
 class Kinematics:
@@ -59,78 +70,138 @@ class Kinematics:
         self.frame = self.plant.GetFrameByName("grasp", self.plant.GetModelInstanceByName("hand"))
         self.lower = self.plant.GetPositionLowerLimits()
         self.upper = self.plant.GetPositionUpperLimits()
+        self.mid = (self.lower + self.upper) / 2
         self.velocity_limits = self.plant.GetVelocityUpperLimits()
+        self._world = self.plant.world_frame()
 
     def pose(self, q: np.ndarray) -> RigidTransform:
         self.plant.SetPositions(self.context, q)
         return self.frame.CalcPoseInWorld(self.context)
 
+    def pose34(self, q: np.ndarray) -> np.ndarray:
+        """``X_WG`` at ``q`` as a 3x4 matrix [R | p] (the fast path of the solvers)."""
+        self.plant.SetPositions(self.context, q)
+        return self.frame.CalcPoseInWorld(self.context).GetAsMatrix34()
+
     def jacobian(self) -> np.ndarray:
         """6x7 spatial-velocity Jacobian of the grasp frame at the context's configuration."""
         return self.plant.CalcJacobianSpatialVelocity(
-            self.context,
-            JacobianWrtVariable.kV,
-            self.frame,
-            np.zeros(3),
-            self.plant.world_frame(),
-            self.plant.world_frame(),
+            self.context, JacobianWrtVariable.kV, self.frame, _ZERO3, self._world, self._world
         )
 
     def error(self, q: np.ndarray, X_WG: RigidTransform) -> np.ndarray:
         """6-vector (rotation as axis-angle, then translation) from the pose at q to X_WG."""
-        X = self.pose(q)
-        dR = X_WG.rotation().multiply(X.rotation().inverse())
-        aa = dR.ToAngleAxis()
-        return np.concatenate([aa.axis() * aa.angle(), X_WG.translation() - X.translation()])
+        return np.array(_error6(X_WG.GetAsMatrix34(), self.pose34(q)))
 
-    def within(self, q: np.ndarray, X_WG: RigidTransform) -> bool:
-        e = self.error(q, X_WG)
-        return bool(
-            np.linalg.norm(e[3:]) <= POSITION_TOL
-            and np.linalg.norm(e[:3]) <= ORIENTATION_TOL
-            and np.all(q >= self.lower - 1e-9)
-            and np.all(q <= self.upper + 1e-9)
-        )
+    def pose_errors(self, q: np.ndarray, X_WG: RigidTransform) -> tuple[float, float]:
+        """(position error in m, orientation error in rad) of ``q`` against ``X_WG``.
+
+        Computed independently of the solvers' error: the angle from the Frobenius
+        distance of the rotations, ``|R1 - R2|_F = 2 sqrt(2) sin(angle / 2)``.
+        """
+        M, M_t = self.pose34(q), X_WG.GetAsMatrix34()
+        chord = np.linalg.norm(M[:, :3] - M_t[:, :3]) / (2 * math.sqrt(2))
+        return float(np.linalg.norm(M[:, 3] - M_t[:, 3])), 2 * math.asin(min(1.0, chord))
+
+    def within_limits(self, q: np.ndarray) -> bool:
+        return bool(np.all(q >= self.lower) and np.all(q <= self.upper))
+
+    def within(
+        self,
+        q: np.ndarray,
+        X_WG: RigidTransform,
+        position_tol: float = POSITION_TOL,
+        orientation_tol: float = ORIENTATION_TOL,
+    ) -> bool:
+        """Whether ``q`` is within the joint limits and puts the grasp frame at ``X_WG``."""
+        if not np.all(np.isfinite(q)):
+            return False
+        dp, dr = self.pose_errors(q, X_WG)
+        return dp <= position_tol and dr <= orientation_tol and self.within_limits(q)
+
+    def newton(
+        self,
+        X_WG: RigidTransform | np.ndarray,
+        q: np.ndarray,
+        damping: float,
+        max_iterations: int,
+        max_step: float,
+        tol: float,
+        stall: float | None = None,
+    ) -> tuple[np.ndarray, int, bool]:
+        """Damped least-squares (Gauss-Newton) steps towards ``X_WG`` within the joint limits.
+
+        Each step solves ``(J J^T + damping^2 I) y = e``, ``dq = J^T y`` for the 6-vector
+        error ``e`` (axis-angle, then translation), leaves out the joints pinned at a
+        limit that the error pushes further out, is capped at ``max_step`` rad per joint
+        and clipped to the limits. Stops when ``|e| < tol`` (converged), after
+        ``max_iterations``, or - with ``stall`` - from the fourth step on when ``|e|^2``
+        shrank by less than that factor (no quadratic convergence: try another seed).
+        Returns (q, iterations, converged).
+        """
+        M_t = X_WG if isinstance(X_WG, np.ndarray) else X_WG.GetAsMatrix34()
+        lo, hi = self.lower, self.upper
+        plant, context, frame, world = self.plant, self.context, self.frame, self._world
+        kv = JacobianWrtVariable.kV
+        lam2 = damping * damping * _I6
+        q = np.minimum(np.maximum(np.asarray(q, float), lo), hi)
+        tol2 = tol * tol
+        previous = math.inf
+        for it in range(max_iterations):
+            plant.SetPositions(context, q)
+            el = _error6(M_t, frame.CalcPoseInWorld(context).GetAsMatrix34())
+            n = el[0] ** 2 + el[1] ** 2 + el[2] ** 2 + el[3] ** 2 + el[4] ** 2 + el[5] ** 2
+            if n < tol2:
+                return q, it, True
+            if stall is not None and it >= 3 and n > stall * previous:
+                return q, it, False
+            previous = n
+            e = np.array(el)
+            J = plant.CalcJacobianSpatialVelocity(context, kv, frame, _ZERO3, world, world)
+            at_limit = (q <= lo) | (q >= hi)
+            if at_limit.any():
+                g = J.T @ e  # the direction each joint would move to reduce the error
+                pinned = at_limit & (((q <= lo) & (g < 0)) | ((q >= hi) & (g > 0)))
+                J = J * ~pinned
+            dq = J.T @ np.linalg.solve(J @ J.T + lam2, e)
+            biggest = max(dq.max(), -dq.min())
+            if biggest > max_step:
+                dq *= max_step / biggest
+            q = np.minimum(np.maximum(q + dq, lo), hi)
+        plant.SetPositions(context, q)
+        el = _error6(M_t, frame.CalcPoseInWorld(context).GetAsMatrix34())
+        return q, max_iterations, sum(v * v for v in el) < tol2
 
 
-def _newton(
-    kin: Kinematics,
-    X_WG: RigidTransform,
-    q: np.ndarray,
-    damping: float,
-    max_iterations: int,
-    max_step: float,
-    tol: float = 1e-6,
-) -> tuple[np.ndarray, int]:
-    """Damped least-squares iterations clamped to the joint limits; returns (q, iterations)."""
-    q = np.clip(np.asarray(q, float), kin.lower, kin.upper)
-    lam2 = damping * damping
-    for it in range(1, max_iterations + 1):
-        e = kin.error(q, X_WG)
-        if np.linalg.norm(e) < tol:
-            return q, it - 1
-        J = kin.jacobian()
-        # Joints pinned at a limit and pushed further out are dropped from this step.
-        free = np.ones(7, bool)
-        dq = J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(6), e)
-        pinned = ((q <= kin.lower + 1e-9) & (dq < 0)) | ((q >= kin.upper - 1e-9) & (dq > 0))
-        if pinned.any():
-            free = ~pinned
-            Jf = J[:, free]
-            dq = np.zeros(7)
-            dq[free] = Jf.T @ np.linalg.solve(Jf @ Jf.T + lam2 * np.eye(6), e)
-        step = np.max(np.abs(dq))
-        if step > max_step:
-            dq *= max_step / step
-        q = np.clip(q + dq, kin.lower, kin.upper)
-    return q, max_iterations
+def _error6(M_t: np.ndarray, M: np.ndarray) -> list[float]:
+    """[rotation vector of R_t R^T, p_t - p] for 3x4 poses (target, current), as floats."""
+    (a, b, c), (d, e, f), (g, h, i) = (M_t[:, :3] @ M[:, :3].T).tolist()
+    x, y, z = 0.5 * (h - f), 0.5 * (c - g), 0.5 * (d - b)  # sin(angle) * axis
+    s = math.sqrt(x * x + y * y + z * z)
+    cos = 0.5 * (a + e + i - 1.0)
+    if s > 1e-9:
+        k = math.atan2(s, cos) / s
+    elif cos > 0:
+        k = 1.0
+    else:  # a half turn: the axis is the dominant column of R + I
+        R = M_t[:, :3] @ M[:, :3].T + np.eye(3)
+        j = int(np.argmax(np.diag(R)))
+        x, y, z = (R[:, j] / np.linalg.norm(R[:, j]) * math.pi).tolist()
+        k = 1.0
+    dx, dy, dz = (M_t[:, 3] - M[:, 3]).tolist()
+    return [k * x, k * y, k * z, dx, dy, dz]
+
+
+def _stop_tol(position_tol: float, orientation_tol: float) -> float:
+    """Newton's stopping norm: a tenth of the tighter tolerance (one more quadratic step)."""
+    return 0.1 * min(position_tol, orientation_tol)
 
 
 class DlsIk:
     """Damped least squares, as the exercise prescribes: damping 0.05, at most 200 iterations.
 
-    Each step is capped at 0.2 rad per joint: uncapped, damping 0.05 overshoots into the
-    joint limits on far targets.
+    One attempt from the seed. Each step is capped at 0.2 rad per joint: uncapped,
+    damping 0.05 overshoots into the joint limits on far targets.
     """
 
     name = "dls"
@@ -141,28 +212,44 @@ class DlsIk:
         damping: float = 0.05,
         max_iterations: int = 200,
         max_step: float = 0.2,
+        position_tol: float = POSITION_TOL,
+        orientation_tol: float = ORIENTATION_TOL,
     ) -> None:
         self.kin = kinematics or Kinematics()
         self.damping = damping
         self.max_iterations = max_iterations
         self.max_step = max_step
+        self.position_tol = position_tol
+        self.orientation_tol = orientation_tol
         self.last_iterations = 0
 
     def solve(self, X_WG: RigidTransform, q_seed: np.ndarray) -> np.ndarray | None:
-        q, self.last_iterations = _newton(
-            self.kin, X_WG, q_seed, self.damping, self.max_iterations, self.max_step
+        tol = _stop_tol(self.position_tol, self.orientation_tol)
+        q, self.last_iterations, _ = self.kin.newton(
+            X_WG, q_seed, self.damping, self.max_iterations, self.max_step, tol
         )
-        return q if self.kin.within(q, X_WG) else None
+        return q if self.kin.within(q, X_WG, self.position_tol, self.orientation_tol) else None
 
 
 class DrakeIk:
-    """Drake ``InverseKinematics``, with a Gauss-Newton front end and seeded restarts.
+    """Newton on Drake's kinematics from the seed and from a table, Drake IK as fallback.
 
-    Order of attempts: (1) 30 lightly damped Newton steps from the seed; (2) the
-    ``InverseKinematics`` program from the seed, then from home and from ``restarts``
-    random configurations (seeded, so runs repeat), each answer polished by Newton steps
-    (Drake imposes orientation as trace(R) >= 2cos(tol) + 1, so the solver's feasibility
-    tolerance can leave ~1e-3 rad) and checked by forward kinematics.
+    Stages, each answer checked by forward kinematics at the solver's tolerances:
+
+    1. ``seed_iterations`` lightly damped Newton steps from ``q_seed`` (with
+       ``newton_first``). Tabletop waypoints seeded with the previous waypoint's solution
+       converge here in a handful of steps and stay on the seed's branch.
+    2. Newton from the ``table_tries`` configurations of a table (``table_size`` random
+       configurations within the limits, drawn once from ``seed``, built on first need)
+       whose grasp poses are nearest to ``X_WG``; a try that stops converging quadratically
+       is abandoned for the next.
+    3. Drake's ``InverseKinematics`` solved by SNOPT, from the seed and from ``restarts``
+       table configurations, each answer polished by Newton steps: Drake imposes the
+       orientation as trace(R) >= 2cos(tol) + 1, so the solver's feasibility tolerance
+       alone leaves up to ~1e-3 rad.
+
+    Nothing depends on earlier queries or on the clock, so the same query always gives
+    the same answer. :attr:`last` tells which stage answered.
     """
 
     name = "drake"
@@ -173,60 +260,134 @@ class DrakeIk:
         restarts: int = 8,
         seed: int = 0,
         newton_first: bool = True,
+        position_tol: float = POSITION_TOL,
+        orientation_tol: float = ORIENTATION_TOL,
+        seed_iterations: int = 10,
+        table_size: int = 4000,
+        table_tries: int = 60,
+        table_iterations: int = 15,
+        near: float = 0.75,
     ) -> None:
         self.kin = kinematics or Kinematics()
         self.restarts = restarts
         self.newton_first = newton_first
-        self._rng = np.random.default_rng(seed)
+        self.position_tol = position_tol
+        self.orientation_tol = orientation_tol
+        self.seed_iterations = seed_iterations
+        self.table_size = table_size
+        self.table_tries = table_tries
+        self.table_iterations = table_iterations
+        self.near = near
         self._seed = seed
+        self._table: _PoseTable | None = None
+        self.last = IkStats("failed", 0, 0)
 
-    def _program(self, X_WG: RigidTransform, q_seed: np.ndarray):
+    @property
+    def table(self) -> _PoseTable:
+        if self._table is None:
+            self._table = _PoseTable(self.kin, self.table_size, self._seed)
+        return self._table
+
+    def _newton(self, M_t: np.ndarray, q: np.ndarray, iterations: int, stall: float | None):
+        tol = _stop_tol(self.position_tol, self.orientation_tol)
+        return self.kin.newton(M_t, q, 1e-3, iterations, 0.6, tol, stall)
+
+    def _program(self, X_WG: RigidTransform, q_seed: np.ndarray) -> InverseKinematics:
         plant = self.kin.plant
         ik = InverseKinematics(plant, with_joint_limits=True)
         p = X_WG.translation()
-        ik.AddPositionConstraint(
-            self.kin.frame, np.zeros(3), plant.world_frame(), p - POSITION_TOL / 2, p + POSITION_TOL / 2
-        )
+        box = np.full(3, self.position_tol / 2)
+        ik.AddPositionConstraint(self.kin.frame, _ZERO3, plant.world_frame(), p - box, p + box)
         ik.AddOrientationConstraint(
-            self.kin.frame, RotationMatrix(), plant.world_frame(), X_WG.rotation(), ORIENTATION_TOL / 2
-        )
-        q = ik.q()
-        ik.prog().AddQuadraticErrorCost(np.eye(7) * 0.01, q_seed, q)
+            self.kin.frame, RotationMatrix(), plant.world_frame(), X_WG.rotation(),
+            self.orientation_tol / 2,
+        )  # fmt: skip
+        ik.prog().AddQuadraticErrorCost(np.eye(7) * 0.01, q_seed, ik.q())
         return ik
 
     def solve(self, X_WG: RigidTransform, q_seed: np.ndarray) -> np.ndarray | None:
         q_seed = np.asarray(q_seed, float)
-        if self.newton_first:
-            q, _ = _newton(self.kin, X_WG, q_seed, 1e-3, 30, 0.6)
-            if self.kin.within(q, X_WG):
+        M_t = X_WG.GetAsMatrix34()
+        tols = (self.position_tol, self.orientation_tol)
+        iterations = 0
+
+        def attempt(q0: np.ndarray, budget: int) -> np.ndarray | None:
+            nonlocal iterations
+            q, it, _ = self._newton(M_t, q0, budget, stall=0.5)
+            iterations += it
+            return q if self.kin.within(q, X_WG, *tols) else None
+
+        seed_near = self.newton_first and (
+            _pose_distance(self.kin.pose34(q_seed), M_t) <= self.near
+        )
+        if seed_near and (q := attempt(q_seed, self.seed_iterations)) is not None:
+            self.last = IkStats("seed", iterations, 0)
+            return q
+        nearest = self.table.nearest(M_t, max(self.table_tries, self.restarts))
+        for i in nearest[: self.table_tries]:
+            if (q := attempt(self.table.q[i], self.table_iterations)) is not None:
+                self.last = IkStats("table", iterations, 0)
                 return q
-        rng = np.random.default_rng(self._seed)  # same restarts for the same query
-        seeds = [q_seed, Q_HOME] + [
-            rng.uniform(self.kin.lower, self.kin.upper) for _ in range(self.restarts)
-        ]
-        for start in seeds:
+        if self.newton_first and not seed_near:
+            if (q := attempt(q_seed, 3 * self.seed_iterations)) is not None:
+                self.last = IkStats("seed", iterations, 0)
+                return q
+        starts = [q_seed, Q_HOME] + [self.table.q[i] for i in nearest[: self.restarts]]
+        for programs, start in enumerate(starts, start=1):
             ik = self._program(X_WG, q_seed)
             result = Solve(ik.prog(), np.clip(start, self.kin.lower, self.kin.upper))
             q = result.GetSolution(ik.q())
             if not np.all(np.isfinite(q)):
                 continue
-            q, _ = _newton(self.kin, X_WG, q, 1e-4, 5, 0.6)
-            if self.kin.within(q, X_WG):
+            q, it, _ = self._newton(M_t, q, 10, stall=None)
+            iterations += it
+            if self.kin.within(q, X_WG, *tols):
+                self.last = IkStats("snopt", iterations, programs)
                 return q
+        self.last = IkStats("failed", iterations, len(starts))
         return None
+
+
+#: Weight of the rotation matrix against the position (m) when comparing poses: a radian
+#: of rotation counts about as much as 0.4 m of translation.
+_ROTATION_WEIGHT = 0.3
+
+
+def _feature(M: np.ndarray) -> np.ndarray:
+    """A 3x4 pose as the 12-vector [p, w R] whose Euclidean distance compares poses."""
+    return np.concatenate([M[:, 3], _ROTATION_WEIGHT * M[:, :3].ravel()])
+
+
+def _pose_distance(M1: np.ndarray, M2: np.ndarray) -> float:
+    return float(np.linalg.norm(_feature(M1) - _feature(M2)))
+
+
+class _PoseTable:
+    """Random configurations within the limits and their grasp poses, for seeding Newton."""
+
+    def __init__(self, kin: Kinematics, size: int, seed: int) -> None:
+        rng = np.random.default_rng([_TABLE_STREAM, seed])  # not any user's default_rng(seed)
+        self.q = rng.uniform(kin.lower, kin.upper, (size, 7))
+        self.features = np.array([_feature(kin.pose34(q)) for q in self.q])
+        self.norms = np.einsum("ij,ij->i", self.features, self.features)
+
+    def nearest(self, M: np.ndarray, k: int) -> np.ndarray:
+        """Indices of the ``k`` configurations whose poses are nearest ``M``, nearest first."""
+        k = min(k, len(self.q))
+        d = self.norms - 2 * (self.features @ _feature(M))
+        idx = np.argpartition(d, k - 1)[:k]
+        return idx[np.argsort(d[idx], kind="stable")]
 
 
 SOLVERS = {"drake": DrakeIk, "dls": DlsIk}
 
 
-def make_solver(name: str, kinematics: Kinematics | None = None) -> IkSolver:
-    """The IK solver registered as ``name`` (``drake`` or ``dls``)."""
-    from cake_drake.errors import InputError
-
+def make_solver(name: str, kinematics: Kinematics | None = None, **options) -> IkSolver:
+    """The IK solver registered as ``name`` (``drake`` or ``dls``), built with ``options``."""
     try:
         cls = SOLVERS[name]
     except KeyError:
         raise InputError(
             f"unknown IK solver {name!r}; choose one of: {', '.join(SOLVERS)}"
         ) from None
-    return cls(kinematics)
+    return cls(kinematics, **options)

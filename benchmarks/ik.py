@@ -1,0 +1,195 @@
+"""IK benchmark: success rate, median and p90 solve time of both solvers on two sets.
+
+(a) tabletop: every waypoint of problem_5 and of seeded generated problems, in plan
+    order, each seeded with the solver's previous solution (as ``solve_action`` does),
+    at the pipeline's tolerances. The cubes' poses are rolled forward symbolically: the
+    picked cube rides in the hand, the placed cube rests where it was set down.
+(b) random (the TRAC-IK protocol): random configurations uniformly within the joint
+    limits -> forward kinematics -> solve that pose from the mid-limits seed. Success is
+    checked independently (position within 1e-5 m, rotation within 1e-5 rad, joints
+    within limits); both solvers are built with 1e-5 tolerances.
+
+With ``--json`` the last line is one JSON object
+``{"tabletop": {"drake": {"success_rate", "median_ms", "p90_ms"}, "dls": {...}},
+"random": {...}}`` (``success_rate`` is a fraction, 0..1). Times are wall-clock per
+``solve`` call, on one core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from cake_drake.geometric.ik import DlsIk, DrakeIk, Kinematics  # noqa: E402
+from cake_drake.geometric.waypoints import (  # noqa: E402
+    PICK_ACTIONS,
+    Waypoint,
+    WaypointParams,
+    WorldView,
+    waypoints_for,
+)
+from cake_drake.symbolic import (  # noqa: E402
+    BLOCKSWORLD_DOMAIN,
+    PROBLEM_5,
+    GroundAction,
+    load_domain,
+    load_problem,
+    parse_problem,
+    random_problem,
+    solve_problem,
+    towers,
+)
+from cake_drake.world.scene import Q_HOME, layout  # noqa: E402
+
+PROTOCOL_TOL = 1e-5  # m and rad, as TRAC-IK's published benchmark
+#: Generated problems of the tabletop set: (blocks, seed).
+GENERATED = ((5, 1), (6, 2), (6, 3), (7, 4))
+
+
+def machine() -> str:
+    cpu = "unknown CPU"
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    return f"{cpu}, {os.cpu_count()} cores, load average {load}, Python {platform.python_version()}"
+
+
+def rollout(
+    actions: list[GroundAction],
+    init_poses: dict[str, RigidTransform],
+    X_WG: RigidTransform,
+    params: WaypointParams = WaypointParams(),
+) -> list[tuple[GroundAction, Waypoint]]:
+    """Every waypoint of a plan, the world updated as the actions should leave it."""
+    poses = dict(init_poses)
+    held, X_GB = None, RigidTransform()
+    out = []
+    for action in actions:
+        wps = waypoints_for(action, WorldView(poses, X_WG, held), params)
+        out += [(action, w) for w in wps]
+        block = action.args[0]
+        if action.name in PICK_ACTIONS:
+            X_GB = wps[1].X_WG.inverse() @ poses[block]  # grasp: the cube in the hand
+            poses[block] = wps[-1].X_WG @ X_GB  # lifted with the hand
+            held = block
+        else:
+            X_WB = wps[1].X_WG @ X_GB  # where it is released ...
+            p = X_WB.translation() - [0, 0, params.place_drop]  # ... and falls onto
+            poses[block] = RigidTransform(X_WB.rotation(), p)
+            held = None
+        X_WG = wps[-1].X_WG
+    return out
+
+
+def tabletop_poses(kin: Kinematics) -> list[RigidTransform]:
+    """The waypoints of problem_5 and of the generated problems, in plan order."""
+    domain = load_domain(BLOCKSWORLD_DOMAIN)
+    problems = [load_problem(BLOCKSWORLD_DOMAIN, PROBLEM_5)]
+    problems += [parse_problem(domain, random_problem(n, s)) for n, s in GENERATED]
+    poses = []
+    for problem in problems:
+        plan = solve_problem(problem, "gbfs-ff")
+        start = layout(towers(problem.init))
+        poses += [w.X_WG for _, w in rollout(list(plan.actions), start, kin.pose(Q_HOME))]
+    return poses
+
+
+def summary(times: list[float], ok: list[bool]) -> dict[str, float]:
+    t = np.array(times) * 1e3
+    return {
+        "success_rate": float(np.mean(ok)),
+        "median_ms": float(np.median(t)),
+        "p90_ms": float(np.percentile(t, 90)),
+    }
+
+
+def run_tabletop(solver, kin: Kinematics, poses: list[RigidTransform]):
+    """Solve the waypoints in order, each seeded with the previous solution."""
+    times, ok, q = [], [], Q_HOME.copy()
+    for X in poses:
+        t0 = time.perf_counter()
+        sol = solver.solve(X, q)
+        times.append(time.perf_counter() - t0)
+        good = sol is not None and kin.within(sol, X, solver.position_tol, solver.orientation_tol)
+        ok.append(good)
+        q = sol if good else q
+    return summary(times, ok)
+
+
+def run_random(solver, kin: Kinematics, n: int, seed: int, stages: Counter | None = None):
+    rng = np.random.default_rng(seed)
+    times, ok = [], []
+    for _ in range(n):
+        X = kin.pose(rng.uniform(kin.lower, kin.upper))
+        t0 = time.perf_counter()
+        sol = solver.solve(X, kin.mid)
+        times.append(time.perf_counter() - t0)
+        if sol is None:
+            ok.append(False)
+        else:
+            dp, dr = kin.pose_errors(sol, X)
+            ok.append(dp <= PROTOCOL_TOL and dr <= PROTOCOL_TOL and kin.within_limits(sol))
+        if stages is not None:
+            stages[solver.last.stage] += 1
+    return summary(times, ok)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--samples", type=int, default=1000, help="random poses (default 1000)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the random poses")
+    parser.add_argument("--json", action="store_true", help="end with one line of JSON")
+    args = parser.parse_args(argv)
+    if args.samples < 1:
+        parser.error(f"--samples must be a positive integer, got {args.samples}")
+
+    kin = Kinematics()
+    print(f"machine: {machine()}")
+    results: dict[str, dict[str, dict[str, float]]] = {"tabletop": {}, "random": {}}
+    poses = tabletop_poses(kin)
+    t0 = time.perf_counter()
+    for name, solver in (("drake", DrakeIk(kin)), ("dls", DlsIk(kin))):
+        results["tabletop"][name] = run_tabletop(solver, kin, poses)
+    tab_s = time.perf_counter() - t0
+    stages: Counter = Counter()
+    tols = {"position_tol": PROTOCOL_TOL, "orientation_tol": PROTOCOL_TOL}
+    t0 = time.perf_counter()
+    drake = DrakeIk(kin, **tols)
+    drake.table  # noqa: B018 - build the seed table outside the timed solves
+    results["random"]["drake"] = run_random(drake, kin, args.samples, args.seed, stages)
+    results["random"]["dls"] = run_random(DlsIk(kin, **tols), kin, args.samples, args.seed)
+    rand_s = time.perf_counter() - t0
+
+    print(f"(a) tabletop: {len(poses)} waypoints of problem_5 and {len(GENERATED)} generated "
+          f"problems, tolerances 1e-4 m / 1e-3 rad ({tab_s:.1f} s)")  # fmt: skip
+    print(f"(b) random: {args.samples} configurations (seed {args.seed}) from the mid-limits "
+          f"seed, checked at 1e-5 m / 1e-5 rad ({rand_s:.1f} s)")  # fmt: skip
+    print(f"{'set':<10}{'solver':<8}{'success':>10}{'median ms':>11}{'p90 ms':>9}")
+    for set_name, by_solver in results.items():
+        for name, r in by_solver.items():
+            print(f"{set_name:<10}{name:<8}{100 * r['success_rate']:>9.2f}%"
+                  f"{r['median_ms']:>11.3f}{r['p90_ms']:>9.3f}")  # fmt: skip
+    print("drake stages on (b): " + ", ".join(f"{k} {v}" for k, v in sorted(stages.items())))
+    if args.json:
+        print(json.dumps(results))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
