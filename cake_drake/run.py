@@ -315,7 +315,6 @@ def run(
 
         staged = OutputDir(out)
         try:
-            t = time.perf_counter()
             write_outputs(
                 staged, problem, plan, cake, execution, success, message, stages, worker, meshcat
             )
@@ -323,7 +322,6 @@ def run(
         except BaseException:
             staged.discard()
             raise
-        stages["outputs"] = time.perf_counter() - t
         return result
     finally:
         if worker is not None:
