@@ -1,0 +1,124 @@
+"""The notebooks run headless, error-free, in test mode; git holds them without outputs.
+
+Each notebook is executed with nbclient in a fresh temporary working directory with
+``CAKE_DRAKE_QUICK=1`` (shorter simulations) and ``MPLBACKEND=Agg``. The helper that
+draws the Diagram (:mod:`cake_drake.outputs.graph`) is tested here too.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+
+from cake_drake.errors import InputError
+from cake_drake.outputs.graph import diagram_svg, graphviz_svg, ports_text
+
+NOTEBOOKS_DIR = Path(__file__).resolve().parent.parent / "notebooks"
+NOTEBOOKS = ("01_symbolic", "02_diagram", "03_computed_torque")
+CELL_TIMEOUT_S = 300
+
+needs_dot = pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz dot not installed")
+
+
+def _read(name: str) -> nbformat.NotebookNode:
+    return nbformat.read(NOTEBOOKS_DIR / f"{name}.ipynb", as_version=4)
+
+
+def test_every_notebook_is_listed():
+    assert sorted(p.stem for p in NOTEBOOKS_DIR.glob("*.ipynb")) == sorted(NOTEBOOKS)
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_notebook_is_committed_without_outputs(name):
+    nb = _read(name)
+    nbformat.validate(nb)
+    code = [c for c in nb.cells if c.cell_type == "code"]
+    assert code, f"{name} has no code cells"
+    dirty = [i for i, c in enumerate(nb.cells) if c.cell_type == "code"
+             and (c.execution_count is not None or c.outputs)]  # fmt: skip
+    assert not dirty, f"{name}: cells {dirty} keep outputs; clear them before committing"
+    assert nb.metadata.get("kernelspec", {}).get("name") == "python3"
+
+
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_notebook_documents_quick_mode(name):
+    first = _read(name).cells[0]
+    assert first.cell_type == "markdown"
+    assert "CAKE_DRAKE_QUICK=1" in first.source
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NOTEBOOKS)
+def test_notebook_runs(name, tmp_path, monkeypatch):
+    from nbclient import NotebookClient
+
+    nb = _read(name)
+    # After the notebook: Meshcat must have stayed off (it is opt-in, never started in CI).
+    nb.cells.append(
+        nbformat.v4.new_code_cell(
+            "assert not globals().get('USE_MESHCAT', False), 'Meshcat is on by default'"
+        )
+    )
+    monkeypatch.setenv("CAKE_DRAKE_QUICK", "1")
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    monkeypatch.setenv("PYTHONHASHSEED", "0")
+    # The kernel is the venv's python (jupyter_client runs "python" as sys.executable).
+    monkeypatch.setenv("PATH", str(Path(sys.executable).parent) + os.pathsep + os.environ["PATH"])
+    monkeypatch.chdir(tmp_path)
+    before = sorted(NOTEBOOKS_DIR.iterdir())
+    client = NotebookClient(
+        nb,
+        kernel_name="python3",
+        timeout=CELL_TIMEOUT_S,
+        resources={"metadata": {"path": str(tmp_path)}},
+    )
+    client.execute()  # raises CellExecutionError, naming the cell, on any error
+
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
+              if o.output_type == "error"]  # fmt: skip
+    assert not errors
+    assert sorted(NOTEBOOKS_DIR.iterdir()) == before, "a notebook wrote files next to itself"
+
+
+def test_graphviz_svg_names_missing_dot(tmp_path):
+    missing = tmp_path / "no-such-dot"
+    with pytest.raises(InputError, match="not found on PATH.*apt-get install graphviz"):
+        graphviz_svg("digraph { a -> b }", dot=str(missing))
+
+
+@needs_dot
+def test_graphviz_svg_reports_bad_source():
+    with pytest.raises(InputError, match="rejected the Graphviz source"):
+        graphviz_svg("digraph { a -> ")
+
+
+@needs_dot
+def test_diagram_svg_names_systems_and_ports():
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import Adder, ConstantVectorSource
+
+    builder = DiagramBuilder()
+    source = builder.AddNamedSystem("source", ConstantVectorSource([1.0, 2.0]))
+    adder = builder.AddNamedSystem("adder", Adder(2, 2))
+    builder.Connect(source.get_output_port(), adder.get_input_port(0))
+    builder.Connect(source.get_output_port(), adder.get_input_port(1))
+    builder.ExportOutput(adder.get_output_port(), "sum")
+    diagram = builder.Build()
+    diagram.set_name("tiny")
+
+    svg = diagram_svg(diagram)
+    assert svg.lstrip().startswith("<?xml") and "</svg>" in svg
+    for text in ("name=source", "name=adder", "sum"):
+        assert text in svg
+
+    assert ports_text(adder).splitlines() == [
+        "adder (Adder)",
+        "  input   u0   vector[2]",
+        "  input   u1   vector[2]",
+        "  output  sum  vector[2]",
+    ]
