@@ -19,12 +19,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from cake_drake.diagram import RunConfig
 from cake_drake.dynamic.analysis import settling
 from cake_drake.errors import EXIT_OK, ExecutionError, InputError, run_cli
 from cake_drake.outputs.files import OutputDir
 from cake_drake.run import RunResult, run
+from cake_drake.symbolic import PROBLEM_5
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -42,6 +44,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="trajectory.npz to replay (default: record one in position mode)",
     )
     p.add_argument("--differentiate", choices=("spline", "central"), default="spline")
+    p.add_argument(
+        "--problem",
+        type=Path,
+        default=PROBLEM_5,
+        help="the problem the reference was (or is to be) recorded on (default: problem_5)",
+    )
     p.add_argument("--out", type=Path, default=Path("outputs"), help="output folder")
     p.add_argument("--quiet", action="store_true")
     return p.parse_args(argv)
@@ -53,15 +61,25 @@ def study(
     reference: Path | None = None,
     differentiate: str = "spline",
     workdir: Path | None = None,
+    problem_path: Path = PROBLEM_5,
 ) -> tuple[dict, dict[float, RunResult]]:
-    """Replay ``reference`` once per Kd; returns (gains.json content, results by Kd)."""
+    """Replay ``reference`` once per Kd; returns (gains.json content, results by Kd).
+
+    ``reference`` must have been recorded on ``problem_path`` (the replay lays out the
+    same cubes); without one, a position-mode run of that problem records it.
+    """
     if not kds or any(k < 0 for k in kds):
         raise InputError(f"--kd needs one or more values >= 0, got {kds}")
     if kp <= 0:
         raise InputError(f"--kp must be > 0, got {kp}")
     if reference is None:
         workdir = workdir or Path("outputs")
-        recorded = run(RunConfig(mode="position"), out=workdir / "reference", render=False)
+        recorded = run(
+            RunConfig(mode="position"),
+            problem_path=problem_path,
+            out=workdir / "reference",
+            render=False,
+        )
         if not recorded.success:
             raise ExecutionError(f"recording the reference failed: {recorded.message}")
         reference = workdir / "reference" / "trajectory.npz"
@@ -76,7 +94,7 @@ def study(
         config = RunConfig(
             mode="torque", kp=kp, kd=kd, reference=reference, differentiate=differentiate
         )
-        result = run(config, out=None)
+        result = run(config, problem_path=problem_path, out=None)
         results[kd] = result
         logs = result.execution.logs
         err = logs.q - logs.q_d
@@ -100,21 +118,19 @@ def study(
     return table, results
 
 
-def comparison_plot(results: dict[float, RunResult], path: Path, joint: int = 4) -> None:
+def comparison_plot(
+    results: dict[float, RunResult], path: Path | None = None, joint: int = 4
+) -> Figure:
     """Joint ``joint``'s tracking error (left) and commanded torque (right), one trace per Kd."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from cake_drake.outputs.plots import phase_spans, shade_phases
+    from cake_drake.outputs.plots import phase_key, phase_spans, shade_phases
 
     j = joint - 1
-    fig, (ax_e, ax_t) = plt.subplots(1, 2, figsize=(13, 4.5), sharex=True)
+    fig = Figure(figsize=(13, 4.5))
+    ax_e, ax_t = fig.subplots(1, 2, sharex=True)
     first = next(iter(results.values())).execution.logs
     spans = phase_spans(first.t, first.phase)
     shade_phases(ax_e, spans)
-    shade_phases(ax_t, spans, label=True)
+    shade_phases(ax_t, spans)
     for kd, result in results.items():
         logs = result.execution.logs
         ax_e.plot(logs.t, (logs.q[:, j] - logs.q_d[:, j]) * 1000, lw=0.9, label=f"Kd = {kd:g}")
@@ -125,10 +141,12 @@ def comparison_plot(results: dict[float, RunResult], path: Path, joint: int = 4)
         ax.set_xlabel("time [s]")
         ax.legend(loc="lower right", fontsize=8)
     kp = next(iter(results.values())).cake.config.gains()[0][j]
-    fig.suptitle(f"Computed torque, Kp = {kp:g}: tracking error and torque as Kd changes")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    fig.suptitle(f"Computed torque, Kp = {kp:g}: tracking error and torque as Kd changes", y=0.99)
+    phase_key(fig)
+    fig.tight_layout(rect=(0, 0, 1, 0.88))
+    if path is not None:
+        fig.savefig(path, dpi=110)
+    return fig
 
 
 def format_table(table: dict) -> str:
@@ -152,7 +170,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.reference is not None and not args.reference.is_file():
         raise InputError(f"{args.reference}: no such file (expected a trajectory.npz from a run)")
-    table, results = study(args.kd, args.kp, args.reference, args.differentiate, args.out)
+    table, results = study(
+        args.kd, args.kp, args.reference, args.differentiate, args.out, args.problem
+    )
     out = OutputDir(args.out)
     try:
         comparison_plot(results, out.path("kd_comparison.png"))

@@ -1,17 +1,19 @@
-"""Plots from the loggers: joint 4's position, reference and torque, phases shaded."""
+"""Plots from the loggers: joint 4's position, reference and torque, phases shaded.
+
+Figures are made with matplotlib's object API (no pyplot), so plotting neither needs
+nor changes a GUI backend: the CLI writes PNGs headless, and a notebook can display
+the returned :class:`~matplotlib.figure.Figure` inline.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from cake_drake.geometric.trajectory import PHASE_NAMES  # noqa: E402
+from cake_drake.geometric.trajectory import PHASE_NAMES
 
 PHASE_COLOURS = {
     "pre-grasp": "#dbe9f6",
@@ -36,21 +38,25 @@ def phase_spans(t: np.ndarray, phase: np.ndarray) -> list[tuple[float, float, st
     return spans
 
 
-def shade_phases(ax, spans, label: bool = False) -> None:
+def shade_phases(ax, spans) -> None:
+    """Shade each phase's time span in its colour, behind the data."""
     for t0, t1, name in spans:
         ax.axvspan(t0, t1, color=PHASE_COLOURS[name], lw=0, zorder=0)
-    if label:
-        from matplotlib.patches import Patch
 
-        handles = [Patch(color=c, label=n) for n, c in PHASE_COLOURS.items()]
-        ax.legend(
-            handles=handles,
-            loc="upper center",
-            ncol=6,
-            fontsize=7,
-            bbox_to_anchor=(0.5, 1.32),
-            frameon=False,
-        )
+
+def phase_key(fig: Figure) -> None:
+    """A one-row key of the phase colours along the top of ``fig``."""
+    from matplotlib.patches import Patch
+
+    handles = [Patch(color=c, label=n) for n, c in PHASE_COLOURS.items()]
+    fig.legend(
+        handles=handles,
+        loc="upper center",
+        ncol=6,
+        fontsize=8,
+        frameon=False,
+        bbox_to_anchor=(0.5, 0.955),
+    )
 
 
 def joint_plot(
@@ -59,20 +65,22 @@ def joint_plot(
     q_d: np.ndarray,
     tau: np.ndarray,
     phase: np.ndarray,
-    path: str | Path,
+    path: str | Path | None = None,
     joint: int = 4,
     title: str = "",
     tau_label: str = "τ commanded",
     extra_tau: Sequence[tuple[np.ndarray, str]] = (),
-) -> None:
-    """Three panels for one joint (1-based): q and q_d, tracking error, torque."""
+) -> Figure:
+    """Three panels for one joint (1-based): q and q_d, tracking error, torque.
+
+    Saved to ``path`` when given; the figure is returned either way.
+    """
     j = joint - 1
     spans = phase_spans(t, phase)
-    fig, axes = plt.subplots(
-        3, 1, figsize=(11, 7.5), sharex=True, gridspec_kw={"height_ratios": [3, 2, 3]}
-    )
+    fig = Figure(figsize=(11, 7.5))
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 2, 3]})
     ax = axes[0]
-    shade_phases(ax, spans, label=True)
+    shade_phases(ax, spans)
     ax.plot(t, q_d[:, j], color="k", lw=1.2, ls="--", label="q_d (reference)")
     ax.plot(t, q[:, j], color="tab:blue", lw=1.0, label="q (measured)")
     ax.set_ylabel(f"joint {joint} angle [rad]")
@@ -91,8 +99,9 @@ def joint_plot(
     ax.set_xlabel("time [s]")
     ax.legend(loc="lower right", fontsize=8)
     if title:
-        fig.suptitle(title, y=0.995, fontsize=11)
-    fig.tight_layout()
-    path = Path(path)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+        fig.suptitle(title, y=0.99, fontsize=11)
+    phase_key(fig)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    if path is not None:
+        fig.savefig(Path(path), dpi=110)
+    return fig
