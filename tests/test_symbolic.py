@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import sys
@@ -126,6 +127,16 @@ def test_plan_note_names_planner_search_heuristic():
         "planner astar-lmcut: search A*, heuristic LM-cut, 10 actions (optimal), "
     )
     assert note.endswith(" ms")
+
+
+def test_pyperplan_logging_is_silenced_and_logging_left_as_found(caplog):
+    root = logging.getLogger()
+    handlers = list(root.handlers)
+    caplog.set_level(logging.DEBUG)
+    for planner in ("astar-lmcut", "gbfs-ff"):
+        solve(BLOCKSWORLD_DOMAIN, PROBLEM_5, planner)
+    assert [r.getMessage() for r in caplog.records] == []
+    assert root.handlers == handlers and logging.root.manager.disable == logging.NOTSET
 
 
 def test_unknown_planner_lists_choices():
