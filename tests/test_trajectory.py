@@ -1,0 +1,180 @@
+"""Joint trajectories: limits, smoothness, gripper ramps, trajectory.npz round trip and errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cake_drake.errors import InputError
+from cake_drake.geometric.ik import Kinematics
+from cake_drake.geometric.trajectory import (
+    GRIPPER_CLOSED,
+    GRIPPER_OPEN,
+    PANDA_ACCELERATION,
+    PANDA_VELOCITY,
+    PHASE_NAMES,
+    JointTrajectory,
+    Timing,
+    load_npz,
+    save_npz,
+)
+from cake_drake.world.scene import Q_HOME
+
+DT = 1e-3
+TIMING = Timing()
+
+
+@pytest.fixture(scope="module")
+def limits():
+    kin = Kinematics()
+    return kin.lower, kin.upper
+
+
+@pytest.fixture(scope="module")
+def trajectory(limits):
+    """Moves between configurations spread over the joint range, holds and gripper ramps."""
+    lower, upper = limits
+    rng = np.random.default_rng(2)
+    traj = JointTrajectory(Q_HOME.copy())
+    phases = ["pre-grasp", "grasp", "lift", "transport", "place", "retract"]
+    for i in range(12):
+        # Near the limits too: a straight line between in-limit points stays in limits.
+        q = rng.uniform(lower + 0.01, upper - 0.01) if i % 3 else Q_HOME + 0.02 * i
+        phase = phases[i % len(phases)]
+        traj.move(q, phase, i // 3, TIMING)
+        if phase == "grasp":
+            traj.hold(TIMING.settle_time, phase, i // 3)
+            traj.hold(TIMING.gripper_time, phase, i // 3, gripper=GRIPPER_CLOSED)
+        if phase == "place":
+            traj.hold(TIMING.gripper_time, phase, i // 3, gripper=GRIPPER_OPEN)
+    return traj
+
+
+@pytest.fixture(scope="module")
+def samples(trajectory):
+    return trajectory.sample(DT)
+
+
+def test_positions_stay_within_joint_limits(samples, limits):
+    lower, upper = limits
+    assert np.all(samples["q"] >= lower - 1e-12) and np.all(samples["q"] <= upper + 1e-12)
+
+
+def test_velocity_and_acceleration_within_the_stated_fractions_of_the_limits(samples):
+    v_max = TIMING.velocity_fraction * PANDA_VELOCITY
+    a_max = TIMING.acceleration_fraction * PANDA_ACCELERATION
+    assert np.all(np.abs(samples["qd"]) <= v_max * (1 + 1e-9))
+    assert np.all(np.abs(samples["qdd"]) <= a_max * (1 + 1e-9))
+
+
+def test_each_move_is_as_fast_as_the_limits_allow(trajectory):
+    """Durations come from the limits, not a fixed time: one joint reaches its bound."""
+    for seg in trajectory.segments:
+        d = np.abs(seg.q1 - seg.q0)
+        if not d.any() or seg.duration <= TIMING.min_move:
+            continue
+        scale = TIMING.gentle if PHASE_NAMES[seg.phase] in TIMING.gentle_phases else 1.0
+        v_ratio = 1.875 * d / seg.duration / (scale * TIMING.velocity_fraction * PANDA_VELOCITY)
+        a_ratio = (10 / np.sqrt(3)) * d / seg.duration**2
+        a_ratio /= scale * TIMING.acceleration_fraction * PANDA_ACCELERATION
+        assert max(v_ratio.max(), a_ratio.max()) == pytest.approx(1.0, rel=1e-9)
+
+
+def test_rest_at_every_waypoint_and_derivatives_consistent(trajectory, samples):
+    for seg in trajectory.segments:
+        for t in (seg.t0, seg.t0 + seg.duration):
+            _, v, a = trajectory.evaluate(t)
+            assert np.allclose(v, 0, atol=1e-12) and np.allclose(a, 0, atol=1e-12)
+    # qd and qdd are the derivatives of q and qd (central differences).
+    q, qd, qdd = samples["q"], samples["qd"], samples["qdd"]
+    np.testing.assert_allclose((q[2:] - q[:-2]) / (2 * DT), qd[1:-1], atol=5e-3)
+    np.testing.assert_allclose((qd[2:] - qd[:-2]) / (2 * DT), qdd[1:-1], atol=0.1)
+
+
+def test_jerk_is_bounded_by_the_quintic_peak(trajectory, samples):
+    """Finite-difference jerk never exceeds the largest segment's 60 d / T^3."""
+    bound = max(60 * np.max(np.abs(s.q1 - s.q0)) / s.duration**3 for s in trajectory.segments)
+    jerk = np.diff(samples["qdd"], axis=0) / DT
+    assert np.all(np.isfinite(jerk))
+    assert np.max(np.abs(jerk)) <= bound * 1.001
+    # And per joint: no step in acceleration anywhere (the acceleration is continuous).
+    assert np.max(np.abs(np.diff(samples["qdd"], axis=0))) <= bound * DT * 1.001
+
+
+def test_gripper_ramps_during_holds_and_labels_follow(trajectory, samples):
+    g = samples["gripper"]
+    assert g[0] == GRIPPER_OPEN and set(np.unique(g)) >= {GRIPPER_OPEN, GRIPPER_CLOSED}
+    ramp_rate = (GRIPPER_OPEN - GRIPPER_CLOSED) / TIMING.gripper_time
+    assert np.max(np.abs(np.diff(g))) <= ramp_rate * DT * 1.01
+    closing = [s for s in trajectory.segments if s.gripper != s.gripper0]
+    assert closing
+    seg = closing[0]
+    mid = seg.t0 + seg.duration / 2
+    finger, rate, phase, action = trajectory.labels(mid)
+    assert finger == pytest.approx((seg.gripper + seg.gripper0) / 2)
+    assert rate == pytest.approx((seg.gripper - seg.gripper0) / seg.duration)
+    assert PHASE_NAMES[phase] in ("grasp", "place") and action == seg.action
+    assert trajectory.labels(trajectory.end_time + 1.0)[2:] == (0, -1)  # idle afterwards
+
+
+def test_npz_round_trip(samples, tmp_path):
+    path = tmp_path / "trajectory.npz"
+    actions = ["(unstack a b)", "(put-down a)", "(pick-up c)", "(stack c d)"]
+    save_npz(path, samples, actions)
+    loaded = load_npz(path)
+    for key, value in samples.items():
+        np.testing.assert_array_equal(loaded[key], value)
+    assert list(loaded["phases"]) == list(PHASE_NAMES)
+    assert list(loaded["actions"]) == actions
+    assert not list(tmp_path.glob("*.part*"))  # written whole, no leftovers
+
+
+def _good(n=5):
+    return {"t": np.arange(n) * 0.1, "q": np.zeros((n, 7)), "gripper": np.full(n, 0.04)}
+
+
+def _write(path, **arrays):
+    np.savez(path, **arrays)
+    return path
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda p: p, "no such file"),
+        (lambda p: (p.write_text("not an archive\n"), p)[1], "not a readable .npz"),
+        (lambda p: _write(p, t=np.arange(5.0), gripper=np.zeros(5)), "missing array 'q'"),
+        (lambda p: _write(p, **{**_good(), "q": np.zeros((5, 6))}), r"expected \(N, 7\)"),
+        (lambda p: _write(p, **{**_good(), "q": np.zeros((4, 7))}), r"expected \(N, 7\)"),
+        (lambda p: _write(p, **{**_good(), "t": np.array([0, 1, 1, 2, 3.0])}), "increase"),
+        (lambda p: _write(p, **{**_good(), "q": np.full((5, 7), np.nan)}), "finite"),
+    ],
+    ids=["missing", "text", "no-q", "six-joints", "length", "time-repeats", "nan"],
+)
+def test_bad_npz_files_are_input_errors(tmp_path, make, message):
+    path = make(tmp_path / "trajectory.npz")
+    with pytest.raises(InputError, match=message):
+        load_npz(path)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="load_npz lets EOFError, BadZipFile, TypeError (a .npy file) and "
+    "UFuncTypeError (string times) through; fix requested from trajectory.py's owner",
+)
+@pytest.mark.parametrize(
+    "content",
+    [b"", b"PK\x03\x04truncated", "npy", "strings"],
+    ids=["empty", "truncated-zip", "npy-not-npz", "string-times"],
+)
+def test_broken_npz_files_are_input_errors_too(tmp_path, content):
+    path = tmp_path / "trajectory.npz"
+    if content == "npy":
+        with open(path, "wb") as f:
+            np.save(f, np.zeros((5, 7)))
+    elif content == "strings":
+        _write(path, **{**_good(), "t": np.array(list("abcde"))})
+    else:
+        path.write_bytes(content)
+    with pytest.raises(InputError):
+        load_npz(path)
