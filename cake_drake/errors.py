@@ -7,6 +7,7 @@ stderr and the exit code stored on the class.
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Callable
 
@@ -59,3 +60,8 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_OK
