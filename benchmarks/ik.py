@@ -1,9 +1,10 @@
 """IK benchmark: success rate, median and p90 solve time of both solvers on two sets.
 
-(a) tabletop: every waypoint of problem_5 and of seeded generated problems, in plan
-    order, each seeded with the solver's previous solution (as ``solve_action`` does),
-    at the pipeline's tolerances. The cubes' poses are rolled forward symbolically: the
-    picked cube rides in the hand, the placed cube rests where it was set down.
+(a) tabletop: every waypoint of problem_5 and of seeded generated problems (planned by
+    gbfs-ff, whose longer plans give more waypoints), in plan order, each seeded with the
+    solver's previous solution (as ``solve_action`` does), at the pipeline's tolerances.
+    The cubes' poses are rolled forward symbolically: the picked cube rides in the hand,
+    the placed cube rests where it was set down.
 (b) random (the TRAC-IK protocol): random configurations uniformly within the joint
     limits -> forward kinematics -> solve that pose from the mid-limits seed. Success is
     checked independently (position within 1e-5 m, rotation within 1e-5 rad, joints
@@ -12,7 +13,8 @@
 With ``--json`` the last line is one JSON object
 ``{"tabletop": {"drake": {"success_rate", "median_ms", "p90_ms"}, "dls": {...}},
 "random": {...}}`` (``success_rate`` is a fraction, 0..1). Times are wall-clock per
-``solve`` call, on one core.
+``solve`` call, on one core. The text output also times the collision check
+(:mod:`cake_drake.geometric.collisions`) on every move of the tabletop plans.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from pydrake.math import RigidTransform
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from cake_drake.geometric.collisions import CollisionChecker, action_collisions  # noqa: E402
 from cake_drake.geometric.ik import DlsIk, DrakeIk, Kinematics  # noqa: E402
 from cake_drake.geometric.waypoints import (  # noqa: E402
     PICK_ACTIONS,
@@ -75,14 +78,15 @@ def rollout(
     init_poses: dict[str, RigidTransform],
     X_WG: RigidTransform,
     params: WaypointParams = WaypointParams(),
-) -> list[tuple[GroundAction, Waypoint]]:
-    """Every waypoint of a plan, the world updated as the actions should leave it."""
+) -> list[tuple[GroundAction, WorldView, list[Waypoint]]]:
+    """Each action with the world it should find and its waypoints, rolled forward."""
     poses = dict(init_poses)
     held, X_GB = None, RigidTransform()
     out = []
     for action in actions:
-        wps = waypoints_for(action, WorldView(poses, X_WG, held), params)
-        out += [(action, w) for w in wps]
+        world = WorldView(dict(poses), X_WG, held)
+        wps = waypoints_for(action, world, params)
+        out.append((action, world, wps))
         block = action.args[0]
         if action.name in PICK_ACTIONS:
             X_GB = wps[1].X_WG.inverse() @ poses[block]  # grasp: the cube in the hand
@@ -97,17 +101,36 @@ def rollout(
     return out
 
 
-def tabletop_poses(kin: Kinematics) -> list[RigidTransform]:
-    """The waypoints of problem_5 and of the generated problems, in plan order."""
+def tabletop_plans(kin: Kinematics) -> list[list[tuple[GroundAction, WorldView, list[Waypoint]]]]:
+    """problem_5 and the generated problems, planned and rolled forward."""
     domain = load_domain(BLOCKSWORLD_DOMAIN)
     problems = [load_problem(BLOCKSWORLD_DOMAIN, PROBLEM_5)]
     problems += [parse_problem(domain, random_problem(n, s)) for n, s in GENERATED]
-    poses = []
+    plans = []
     for problem in problems:
         plan = solve_problem(problem, "gbfs-ff")
         start = layout(towers(problem.init))
-        poses += [w.X_WG for _, w in rollout(list(plan.actions), start, kin.pose(Q_HOME))]
-    return poses
+        plans.append(rollout(list(plan.actions), start, kin.pose(Q_HOME)))
+    return plans
+
+
+def time_collision_checks(plans, kin: Kinematics) -> tuple[list[float], int, int]:
+    """Per-move time of the collision check over every plan (DrakeIk solutions)."""
+    ik = DrakeIk(kin)
+    per_move, moves, found = [], 0, 0
+    for steps in plans:
+        checker = CollisionChecker(sorted(steps[0][1].cube_poses))
+        q = Q_HOME.copy()
+        for action, world, wps in steps:
+            sols = []
+            for w in wps:
+                sols.append(ik.solve(w.X_WG, sols[-1] if sols else q))
+            t0 = time.perf_counter()
+            found += len(action_collisions(checker, action, world, wps, q, sols))
+            per_move.append((time.perf_counter() - t0) / len(wps))
+            moves += len(wps)
+            q = sols[-1]
+    return per_move, moves, found
 
 
 def summary(times: list[float], ok: list[bool]) -> dict[str, float]:
@@ -162,7 +185,8 @@ def main(argv: list[str] | None = None) -> int:
     kin = Kinematics()
     print(f"machine: {machine()}")
     results: dict[str, dict[str, dict[str, float]]] = {"tabletop": {}, "random": {}}
-    poses = tabletop_poses(kin)
+    plans = tabletop_plans(kin)
+    poses = [w.X_WG for steps in plans for _, _, wps in steps for w in wps]
     t0 = time.perf_counter()
     for name, solver in (("drake", DrakeIk(kin)), ("dls", DlsIk(kin))):
         results["tabletop"][name] = run_tabletop(solver, kin, poses)
@@ -186,6 +210,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{set_name:<10}{name:<8}{100 * r['success_rate']:>9.2f}%"
                   f"{r['median_ms']:>11.3f}{r['p90_ms']:>9.3f}")  # fmt: skip
     print("drake stages on (b): " + ", ".join(f"{k} {v}" for k, v in sorted(stages.items())))
+    per_move, moves, found = time_collision_checks(plans, kin)
+    print(f"collision check of the tabletop moves: {moves} moves, {found} collisions, "
+          f"median {1e3 * np.median(per_move):.2f} ms / move, "
+          f"max {1e3 * np.max(per_move):.2f} ms / move (mean over an action)")  # fmt: skip
     if args.json:
         print(json.dumps(results))
     return 0
