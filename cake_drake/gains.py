@@ -28,6 +28,8 @@ from cake_drake.outputs.files import OutputDir
 from cake_drake.run import RunResult, run
 from cake_drake.symbolic import PROBLEM_5
 
+FINAL_HOLD_S = 1.0
+
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p = argparse.ArgumentParser(
@@ -94,7 +96,9 @@ def study(
         config = RunConfig(
             mode="torque", kp=kp, kd=kd, reference=reference, differentiate=differentiate
         )
-        result = run(config, problem_path=problem_path, out=None)
+        # A long final hold: the one stretch where the error can be watched decaying
+        # undisturbed (the gripper holds mid-plan last 0.25 s with the fingers acting).
+        result = run(config, problem_path=problem_path, out=None, settle_s=FINAL_HOLD_S)
         results[kd] = result
         logs = result.execution.logs
         err = logs.q - logs.q_d
@@ -110,6 +114,7 @@ def study(
                     "max": round(s.worst, 3),
                     "per_waypoint": [round(x, 3) for x in s.times],
                     "never_settled": int(sum(not ok for ok in s.settled)),
+                    "final_hold": round(s.times[-1], 3) if s.times else None,
                 },
                 "tower_built": result.success,
                 "message": result.message,

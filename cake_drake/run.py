@@ -259,11 +259,13 @@ def run(
     render: bool = True,
     quiet: bool = True,
     meshcat=None,
+    settle_s: float = 0.3,
 ) -> RunResult:
     """The whole pipeline: problem -> plan -> Diagram -> simulation -> verdict -> outputs.
 
     ``out=None`` writes nothing (for notebooks and studies); ``meshcat`` is an optional
-    ``pydrake.geometry.Meshcat`` to watch (and record to ``replay.html``).
+    ``pydrake.geometry.Meshcat`` to watch (and record to ``replay.html``); ``settle_s`` is
+    how long the world runs on after the last action before the poses are read.
     """
     stages: dict[str, float] = {"import": time.perf_counter() - _T_START}
     config.check()
@@ -301,7 +303,7 @@ def run(
         )
         if meshcat is not None:
             meshcat.StartRecording()
-        execution = execute(cake, n, progress=progress)
+        execution = execute(cake, n, settle_s=settle_s, progress=progress)
         stages["simulation"] = execution.wall_s
         if cake.ik is not None:
             stages["ik"] = sum(cake.ik.times_ms) / 1000

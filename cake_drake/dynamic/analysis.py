@@ -34,10 +34,16 @@ def arrivals(t: np.ndarray, v_d: np.ndarray) -> list[tuple[int, int]]:
 
 @dataclass(frozen=True)
 class Settling:
-    """Settling after each waypoint: seconds until the error stays below ``threshold``."""
+    """Settling after each waypoint where the reference holds still.
 
-    threshold: float  # rad, on the largest joint error
-    times: tuple[float, ...]  # one per arrival; the hold's length if it never settled
+    ``times[i]``: seconds from the arrival until the error stays within ``threshold`` of
+    the value it ends the hold with (a steady offset, e.g. from the unmodelled cube in
+    the hand, is not counted as motion); ``settled[i]`` is False when it was still
+    moving at the end of the hold, and ``times[i]`` is then the hold's length.
+    """
+
+    threshold: float  # rad, on the largest joint's deviation from its final error
+    times: tuple[float, ...]
     settled: tuple[bool, ...]
 
     @property
@@ -50,19 +56,33 @@ class Settling:
 
 
 def settling(
-    t: np.ndarray, q: np.ndarray, q_d: np.ndarray, v_d: np.ndarray, threshold: float = 2e-4
+    t: np.ndarray,
+    q: np.ndarray,
+    q_d: np.ndarray,
+    v_d: np.ndarray,
+    threshold: float = 2e-4,
+    min_hold: float = 0.1,
 ) -> Settling:
-    """How long after each waypoint the tracking error takes to stay below ``threshold``."""
-    err = np.max(np.abs(q - q_d), axis=1)
+    """How long after each waypoint the tracking error takes to settle (see :class:`Settling`).
+
+    Only holds of at least ``min_hold`` seconds are judged: a waypoint the reference
+    passes straight through leaves no time to watch the error decay.
+    """
+    err = q - q_d
     times, ok = [], []
     for a, d in arrivals(t, v_d):
-        above = np.nonzero(err[a:d] >= threshold)[0]
-        if len(above) == 0:
+        if t[d - 1] - t[a] < min_hold:
+            continue
+        dev = np.max(np.abs(err[a:d] - err[d - 1]), axis=1)
+        outside = np.nonzero(dev >= threshold)[0]
+        hold = float(t[d - 1] - t[a])
+        if len(outside) == 0:
             times.append(0.0), ok.append(True)
-        elif above[-1] == d - a - 1:  # still above at the end of the hold
-            times.append(float(t[d - 1] - t[a])), ok.append(False)
         else:
-            times.append(float(t[a + above[-1] + 1] - t[a])), ok.append(True)
+            settle = float(t[a + outside[-1] + 1] - t[a])
+            # Still drifting in the last 20 % of the hold: not settled.
+            settled = settle < 0.8 * hold
+            times.append(settle if settled else hold), ok.append(settled)
     return Settling(threshold, tuple(times), tuple(ok))
 
 

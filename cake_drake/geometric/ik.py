@@ -147,13 +147,14 @@ class Kinematics:
         q = np.minimum(np.maximum(np.asarray(q, float), lo), hi)
         tol2 = tol * tol
         previous = math.inf
+        capped = True
         for it in range(max_iterations):
             plant.SetPositions(context, q)
             el = _error6(M_t, frame.CalcPoseInWorld(context).GetAsMatrix34())
             n = el[0] ** 2 + el[1] ** 2 + el[2] ** 2 + el[3] ** 2 + el[4] ** 2 + el[5] ** 2
             if n < tol2:
                 return q, it, True
-            if stall is not None and it >= 3 and n > stall * previous:
+            if stall is not None and it >= 3 and not capped and n > stall * previous:
                 return q, it, False
             previous = n
             e = np.array(el)
@@ -165,7 +166,8 @@ class Kinematics:
                 J = J * ~pinned
             dq = J.T @ np.linalg.solve(J @ J.T + lam2, e)
             biggest = max(dq.max(), -dq.min())
-            if biggest > max_step:
+            capped = biggest > max_step
+            if capped:
                 dq *= max_step / biggest
             q = np.minimum(np.maximum(q + dq, lo), hi)
         plant.SetPositions(context, q)
@@ -267,6 +269,7 @@ class DrakeIk:
         table_tries: int = 60,
         table_iterations: int = 15,
         near: float = 0.75,
+        stall: float = 0.5,
     ) -> None:
         self.kin = kinematics or Kinematics()
         self.restarts = restarts
@@ -278,6 +281,7 @@ class DrakeIk:
         self.table_tries = table_tries
         self.table_iterations = table_iterations
         self.near = near
+        self.stall = stall
         self._seed = seed
         self._table: _PoseTable | None = None
         self.last = IkStats("failed", 0, 0)
@@ -313,7 +317,7 @@ class DrakeIk:
 
         def attempt(q0: np.ndarray, budget: int) -> np.ndarray | None:
             nonlocal iterations
-            q, it, _ = self._newton(M_t, q0, budget, stall=0.5)
+            q, it, _ = self._newton(M_t, q0, budget, stall=self.stall)
             iterations += it
             return q if self.kin.within(q, X_WG, *tols) else None
 

@@ -46,11 +46,11 @@ class Timing:
 
     velocity_fraction: float = 0.8
     acceleration_fraction: float = 0.7
-    gentle: float = 0.5
+    gentle: float = 0.7
     gentle_phases: tuple[str, ...] = ("grasp", "place", "retract")
     min_move: float = 0.2  # s, shortest move
-    gripper_time: float = 0.3  # s, a close or an open
-    settle_time: float = 0.1  # s, still before the fingers close or open
+    gripper_time: float = 0.2  # s, a close or an open (the fingers' 0.2 m/s limit)
+    settle_time: float = 0.05  # s, still before the fingers close or open
 
     def move_duration(self, q0: np.ndarray, q1: np.ndarray, phase: str = "transport") -> float:
         scale = self.gentle if phase in self.gentle_phases else 1.0
