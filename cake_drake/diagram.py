@@ -34,6 +34,7 @@ from pydrake.systems.primitives import Demultiplexer, LogVectorOutput, VectorLog
 
 from cake_drake.dynamic.reference import ReferenceTrajectory
 from cake_drake.errors import InputError
+from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import TimedSolver
 from cake_drake.geometric.trajectory import Timing
@@ -69,6 +70,8 @@ class RunConfig:
     world: WorldConfig = field(default_factory=WorldConfig)
     timing: Timing = field(default_factory=Timing)
     waypoints: WaypointParams = field(default_factory=WaypointParams)
+    check_collisions: bool = True  # report moves that sweep through cubes (warnings)
+    avoid_collisions: bool = False  # raise the transit height until none is left
     reference: Path | None = None  # replay this trajectory.npz instead of planning motion
     differentiate: str = "spline"  # how the replay gets q-dot and q-double-dot
 
@@ -146,6 +149,8 @@ def build_diagram(
                 config.timing,
                 config.waypoints,
                 config.world.slots,
+                CollisionChecker(blocks) if config.check_collisions else None,
+                config.avoid_collisions,
             ),
         )
         builder.Connect(plan_source.GetOutputPort("action"), waypoint_ik.GetInputPort("action"))

@@ -60,6 +60,7 @@ class Execution:
     reading: Reading
     offsets: dict[str, float]
     logs: Logs
+    warnings: tuple[str, ...]  # collisions found along the planned moves
     q_final: np.ndarray  # arm joints at the end
     fingers_final: float  # opening of one finger at the end (m)
 
@@ -131,6 +132,7 @@ def execute(
     t0 = time.perf_counter()
     error = None
     done = 0
+    warnings: tuple[str, ...] = ()
     if cake.waypoint_ik is not None:
         wik_context = cake.waypoint_ik.GetMyContextFromRoot(context)
         t = 0.0
@@ -139,6 +141,7 @@ def execute(
             simulator.AdvanceTo(t)
             prog = cake.waypoint_ik.progress(wik_context)
             done = prog.done
+            warnings = prog.warnings
             if progress:
                 progress.update(t, time.perf_counter() - t0, done)
             if prog.error is not None:
@@ -174,6 +177,7 @@ def execute(
         reading=reading,
         offsets=stack_offsets(poses, reading.facts),
         logs=_logs(cake, context),
+        warnings=warnings,
         q_final=cake.scene.plant.GetPositions(plant_context, cake.scene.arm).copy(),
         fingers_final=float(cake.scene.plant.GetPositions(plant_context, cake.scene.hand)[0]),
     )

@@ -138,6 +138,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--time-step", type=float, default=0.01, help="simulation step, s (default: 0.01)"
     )
     p.add_argument(
+        "--no-collision-check",
+        action="store_true",
+        help="do not check the planned moves for collisions with other cubes",
+    )
+    p.add_argument(
+        "--avoid-collisions",
+        action="store_true",
+        help="raise the transit height (up to 3 x 5 cm) until no planned move hits a cube",
+    )
+    p.add_argument(
         "--slot-radius",
         type=float,
         default=0.55,
@@ -177,6 +187,8 @@ def make_config(args: argparse.Namespace) -> RunConfig:
         world=WorldConfig(time_step=args.time_step, slot_radius=args.slot_radius),
         reference=args.reference,
         differentiate=args.differentiate,
+        check_collisions=not args.no_collision_check,
+        avoid_collisions=args.avoid_collisions,
     )
     if args.reference is not None and args.mode != "torque":
         raise InputError("--reference replays through InverseDynamicsController: use --mode torque")
@@ -304,6 +316,8 @@ def run(
         if meshcat is not None:
             meshcat.StartRecording()
         execution = execute(cake, n, settle_s=settle_s, progress=progress)
+        for warning in execution.warnings:
+            print(f"warning: collision: {warning}", file=sys.stderr)
         stages["simulation"] = execution.wall_s
         if cake.ik is not None:
             stages["ik"] = sum(cake.ik.times_ms) / 1000

@@ -157,11 +157,6 @@ def test_bad_npz_files_are_input_errors(tmp_path, make, message):
         load_npz(path)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="load_npz lets EOFError, BadZipFile, TypeError (a .npy file) and "
-    "UFuncTypeError (string times) through; fix requested from trajectory.py's owner",
-)
 @pytest.mark.parametrize(
     "content",
     [b"", b"PK\x03\x04truncated", "npy", "strings"],

@@ -16,6 +16,7 @@ Gripper closing and opening are holds of ``gripper_time`` seconds.
 from __future__ import annotations
 
 import bisect
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -97,6 +98,11 @@ class JointTrajectory:
         return JointTrajectory(
             self.start_q, self.start_time, list(self.segments), list(self._starts)
         )
+
+    def assign(self, other: JointTrajectory) -> None:
+        """Take ``other``'s segments (a copy of this one, extended)."""
+        self.segments[:] = other.segments
+        self._starts[:] = other._starts
 
     @property
     def end_time(self) -> float:
@@ -204,13 +210,23 @@ REQUIRED = ("t", "q", "gripper")
 def load_npz(path: str | Path) -> dict[str, np.ndarray]:
     """Read a ``trajectory.npz``; bad files give one clear line."""
     path = Path(path)
+    expected = "expected a trajectory.npz written by python -m cake_drake.run"
     try:
         with np.load(path, allow_pickle=False) as data:
+            if not hasattr(data, "files"):  # a bare .npy array, not an archive
+                raise InputError(f"{path}: a single .npy array, not an .npz archive; {expected}")
             out = {k: data[k] for k in data.files}
     except FileNotFoundError:
-        raise InputError(f"{path}: no such file (expected a trajectory.npz from a run)") from None
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: not a readable .npz trajectory ({e})") from None
+        raise InputError(f"{path}: no such file ({expected})") from None
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, TypeError) as e:
+        raise InputError(f"{path}: not a readable .npz trajectory ({e}); {expected}") from None
+    numeric = [k for k in ("t", "q", "gripper") if k in out and out[k].dtype.kind not in "iuf"]
+    if numeric:
+        raise InputError(
+            f"{path}: array {numeric[0]!r} must hold numbers, not {out[numeric[0]].dtype}"
+        )
     missing = [k for k in REQUIRED if k not in out]
     if missing:
         raise InputError(

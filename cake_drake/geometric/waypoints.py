@@ -47,6 +47,9 @@ class WaypointParams:
     transit_clearance: float = 0.05  # held cube's bottom this far above every tower
     place_drop: float = 0.002  # release the cube this far above its support
     slot_clearance: float = 0.07  # a table slot is free if no cube is this close (xy)
+    #: Quarter turns added to the comfortable gripper yaw. The hand is 20 cm wide along
+    #: the fingers: turned a quarter, it reaches between towers that are close side by side.
+    yaw_turns: int = 0
 
 
 @dataclass(frozen=True)
@@ -121,7 +124,8 @@ def waypoints_for(
     if name in PICK_ACTIONS:
         X_WB = poses[block]
         p = X_WB.translation()
-        yaw = _nearest_turn(_yaw(X_WB), math.atan2(p[1], p[0]))
+        preferred = math.atan2(p[1], p[0]) + params.yaw_turns * math.pi / 2
+        yaw = _nearest_turn(_yaw(X_WB), preferred)
         R = gripper_down(yaw)
         z_transit = _transit_height(poses, held=None, params=params)
         above = max(z_transit, p[2] + params.approach)
@@ -143,7 +147,7 @@ def waypoints_for(
         X_GB = world.X_WG.inverse() @ poses[block]
         # Cube yaw that is a quarter turn of the target's, with the gripper yaw nearest
         # to the comfortable one.
-        preferred = math.atan2(target[1], target[0])
+        preferred = math.atan2(target[1], target[0]) + params.yaw_turns * math.pi / 2
         grip_minus_cube = _yaw(world.X_WG) - _yaw(poses[block])
         cube_yaw = _nearest_turn(target_yaw, preferred - grip_minus_cube)
         X_WB_target = RigidTransform(RotationMatrix.MakeZRotation(cube_yaw), target)

@@ -74,6 +74,7 @@ def summary(problem, plan, cake, execution, success, message, stages) -> dict:
         },
         "actions_done": execution.actions_done,
         "error": execution.error,
+        "collisions": list(execution.warnings),
         "blocks": blocks,
         "facts": [fact_str(f) for f in sorted(execution.reading.facts)],
         "unclassified": list(execution.reading.problems),

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -11,6 +11,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
 from cake_drake.errors import ExecutionError
+from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import IkSolver
 from cake_drake.geometric.solve import solve_action
 from cake_drake.geometric.trajectory import JointTrajectory, Timing
@@ -39,6 +40,7 @@ class Progress:
     done: int = 0  # actions finished
     held: str | None = None  # cube in the hand, by the plan
     error: str | None = None
+    warnings: tuple[str, ...] = ()  # collisions found along the planned moves
 
     def __deepcopy__(self, memo):
         return self
@@ -61,7 +63,8 @@ class WaypointIk(LeafSystem):
     appends the moves (:func:`cake_drake.geometric.solve.solve_action`). ``reference``
     is [q_d (7), v_d (7), a_d (7), finger q_d (2), finger v_d (2), actions done,
     phase index, action index]; an action counts as done when its trajectory has run
-    out. An IK failure stops execution and is kept in :meth:`error`.
+    out. An IK failure stops execution and is kept in the state (``Progress.error``);
+    collisions found along the planned moves (with a ``checker``) are kept as warnings.
     """
 
     def __init__(
@@ -75,9 +78,13 @@ class WaypointIk(LeafSystem):
         timing: Timing = Timing(),
         params: WaypointParams = WaypointParams(),
         slots: tuple[tuple[float, float], ...] = SLOTS,
+        checker: CollisionChecker | None = None,
+        avoid_collisions: bool = False,
     ) -> None:
         super().__init__()
         self._slots = tuple(slots)
+        self._checker = checker
+        self._avoid = avoid_collisions
         self._ik = ik
         self._cubes = dict(cube_bodies)
         self._hand = int(hand_body)
@@ -118,7 +125,7 @@ class WaypointIk(LeafSystem):
         t = context.get_time()
         if prog.working >= 0:
             if t >= prog.trajectory.end_time - 1e-9:
-                new = Progress(prog.trajectory, -1, prog.done + 1, prog.held)
+                new = replace(prog, working=-1, done=prog.done + 1)
                 state.get_mutable_abstract_state(self._state_index).set_value(new)
             return
         cmd: ActionCommand = self._action_port.Eval(context)
@@ -129,7 +136,7 @@ class WaypointIk(LeafSystem):
             traj.hold(t - traj.end_time, "idle", -1)
         held = cmd.action.args[0] if cmd.action.name in PICK_ACTIONS else None
         try:
-            solve_action(
+            motion = solve_action(
                 cmd.action,
                 cmd.index,
                 self._world(context, prog.held),
@@ -137,10 +144,13 @@ class WaypointIk(LeafSystem):
                 traj,
                 self._timing,
                 self._params,
+                self._checker,
+                self._avoid,
             )
-            new = Progress(traj, cmd.index, prog.done, held)
+            warnings = prog.warnings + tuple(motion.warnings(cmd.index, cmd.action))
+            new = replace(prog, trajectory=traj, working=cmd.index, held=held, warnings=warnings)
         except ExecutionError as e:
-            new = Progress(prog.trajectory, -1, prog.done, prog.held, str(e))
+            new = replace(prog, working=-1, error=str(e))
         state.get_mutable_abstract_state(self._state_index).set_value(new)
 
     def _calc_reference(self, context, output) -> None:
