@@ -286,10 +286,10 @@ def run(
     blocks = sorted(problem.objects)
     initial = layout(towers(problem.init), config.world.slots)
     worker = None
-    if render and out is not None:
-        from cake_drake.outputs.render_worker import RenderWorker
+    if out is not None:
+        from cake_drake.outputs.worker import OutputWorker
 
-        worker = RenderWorker(blocks, initial)
+        worker = OutputWorker(blocks, initial, render=render)
     try:
         plan = get_plan(problem, planner, plan_path, time_limit)
         stages["planning"] = time.perf_counter() - t
@@ -332,7 +332,17 @@ def run(
         staged = OutputDir(out)
         try:
             write_outputs(
-                staged, problem, plan, cake, execution, success, message, stages, worker, meshcat
+                staged,
+                problem,
+                plan,
+                cake,
+                execution,
+                success,
+                message,
+                stages,
+                worker,
+                render,
+                meshcat,
             )
             result.written = staged.commit()
         except BaseException:

@@ -7,9 +7,9 @@ import time
 import numpy as np
 from pydrake.math import RollPitchYaw
 
-from cake_drake.geometric.trajectory import PHASE_NAMES, save_npz
+from cake_drake.geometric.trajectory import save_npz
 from cake_drake.outputs.files import OutputDir
-from cake_drake.outputs.plots import joint_plot
+from cake_drake.outputs.worker import OutputWorker
 from cake_drake.symbolic import fact_str, write_plan
 
 
@@ -101,46 +101,45 @@ def write_outputs(
     success,
     message,
     stages,
-    worker=None,
+    worker: OutputWorker,
+    render: bool = True,
     meshcat=None,
 ) -> None:
     """Stage every output file in ``out`` (the caller commits or discards).
 
-    Adds ``stages["outputs"]``: the time spent here before the summary is written.
+    The picture and the joint plot go to ``worker`` first, so they are drawn while the
+    plan, trajectory and summary are written here. Adds ``stages["outputs"]``: the time
+    spent here before the summary is written.
     """
     t0 = time.perf_counter()
+    logs = execution.logs
+    if render:
+        worker.submit_render(
+            execution.poses, execution.q_final, execution.fingers_final, out.path("final_state.png")
+        )
+    torque_mode = cake.config.mode == "torque"
+    kp, kd = cake.config.gains()
+    worker.submit_plot(
+        t=logs.t,
+        q=logs.q,
+        q_d=logs.q_d,
+        tau=logs.tau_commanded if torque_mode else logs.tau_applied,
+        phase=logs.phase,
+        path=out.path("joint4_torque.png"),
+        title=f"joint 4 (elbow), {cake.config.mode} mode"
+        + (f", Kp={kp[3]:g} Kd={kd[3]:g}" if torque_mode else ""),
+        tau_label="τ commanded" if torque_mode else "τ applied",
+        extra_tau=[(gravity_torques(cake.control_plant, logs.q), "g(q): static gravity term")],
+    )
     write_plan(plan, out.path("plan.txt"))
     samples, actions = trajectory_samples(cake, execution)
     save_npz(out.path("trajectory.npz"), samples, actions)
-    logs = execution.logs
-    tau = logs.tau_commanded if cake.config.mode == "torque" else logs.tau_applied
-    title = f"joint 4 (elbow), {cake.config.mode} mode" + (
-        f", Kp={cake.config.gains()[0][3]:g} Kd={cake.config.gains()[1][3]:g}"
-        if cake.config.mode == "torque"
-        else ""
-    )
-    gravity = gravity_torques(cake.control_plant, logs.q)
-    joint_plot(
-        logs.t,
-        logs.q,
-        logs.q_d,
-        tau,
-        logs.phase,
-        out.path("joint4_torque.png"),
-        title=title,
-        tau_label="τ commanded" if cake.config.mode == "torque" else "τ applied",
-        extra_tau=[(gravity, "g(q): static gravity term")],
-    )
-    if worker is not None:
-        worker.render(
-            execution.poses, execution.q_final, execution.fingers_final, out.path("final_state.png")
-        )
     if meshcat is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
         out.path("replay.html").write_text(meshcat.StaticHtml())
+    worker.wait()
     stages["outputs"] = time.perf_counter() - t0
     out.write_json(
         "summary.json", summary(problem, plan, cake, execution, success, message, stages)
     )
-    assert PHASE_NAMES
