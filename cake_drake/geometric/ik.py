@@ -147,14 +147,13 @@ class Kinematics:
         q = np.minimum(np.maximum(np.asarray(q, float), lo), hi)
         tol2 = tol * tol
         previous = math.inf
-        capped = True
         for it in range(max_iterations):
             plant.SetPositions(context, q)
             el = _error6(M_t, frame.CalcPoseInWorld(context).GetAsMatrix34())
             n = el[0] ** 2 + el[1] ** 2 + el[2] ** 2 + el[3] ** 2 + el[4] ** 2 + el[5] ** 2
             if n < tol2:
                 return q, it, True
-            if stall is not None and it >= 3 and not capped and n > stall * previous:
+            if stall is not None and it >= 3 and n > stall * previous:
                 return q, it, False
             previous = n
             e = np.array(el)
@@ -166,8 +165,7 @@ class Kinematics:
                 J = J * ~pinned
             dq = J.T @ np.linalg.solve(J @ J.T + lam2, e)
             biggest = max(dq.max(), -dq.min())
-            capped = biggest > max_step
-            if capped:
+            if biggest > max_step:
                 dq *= max_step / biggest
             q = np.minimum(np.maximum(q + dq, lo), hi)
         plant.SetPositions(context, q)
@@ -238,17 +236,23 @@ class DrakeIk:
 
     Stages, each answer checked by forward kinematics at the solver's tolerances:
 
-    1. ``seed_iterations`` lightly damped Newton steps from ``q_seed`` (with
-       ``newton_first``). Tabletop waypoints seeded with the previous waypoint's solution
-       converge here in a handful of steps and stay on the seed's branch.
+    1. When the seed's grasp pose is within ``near`` of ``X_WG`` (poses compared as
+       [p, 0.3 m * R]; consecutive tabletop waypoints are 0.1-0.7 apart, random poses
+       ~1.1 from the mid-limits configuration's): ``seed_iterations`` lightly damped
+       Newton steps from ``q_seed``, then one ``InverseKinematics`` program from it.
+       Seeded with the previous waypoint's solution, the pipeline's waypoints converge
+       here in a handful of steps and stay on the seed's branch.
     2. Newton from the ``table_tries`` configurations of a table (``table_size`` random
-       configurations within the limits, drawn once from ``seed``, built on first need)
-       whose grasp poses are nearest to ``X_WG``; a try that stops converging quadratically
-       is abandoned for the next.
-    3. Drake's ``InverseKinematics`` solved by SNOPT, from the seed and from ``restarts``
-       table configurations, each answer polished by Newton steps: Drake imposes the
-       orientation as trace(R) >= 2cos(tol) + 1, so the solver's feasibility tolerance
-       alone leaves up to ~1e-3 rad.
+       configurations within the limits, drawn once from ``seed``, built on first need,
+       ~75 ms) whose grasp poses are nearest to ``X_WG``, at most ``table_iterations``
+       steps each; a try whose squared error shrinks by less than ``stall`` in a step
+       (from the fourth on) is abandoned for the next. Then, for a far seed, Newton from
+       the seed; then the same table configurations again, with twice the steps and no
+       early abandon (poses reachable only near the joint limits converge slowly).
+    3. Drake's ``InverseKinematics`` solved by SNOPT (a cost keeps it near the seed) from
+       the seed, home and ``restarts`` table configurations, each answer polished by
+       Newton steps: Drake imposes the orientation as trace(R) >= 2cos(tol) + 1, so the
+       solver's feasibility tolerance alone leaves up to ~1e-3 rad.
 
     Nothing depends on earlier queries or on the clock, so the same query always gives
     the same answer. :attr:`last` tells which stage answered.
@@ -269,7 +273,7 @@ class DrakeIk:
         table_tries: int = 60,
         table_iterations: int = 15,
         near: float = 0.75,
-        stall: float = 0.5,
+        stall: float = 0.7,
     ) -> None:
         self.kin = kinematics or Kinematics()
         self.restarts = restarts
@@ -309,47 +313,62 @@ class DrakeIk:
         ik.prog().AddQuadraticErrorCost(np.eye(7) * 0.01, q_seed, ik.q())
         return ik
 
+    def _snopt(self, X_WG: RigidTransform, q_seed: np.ndarray, start: np.ndarray):
+        """InverseKinematics from ``start`` (cost: stay near ``q_seed``), Newton-polished."""
+        ik = self._program(X_WG, q_seed)
+        result = Solve(ik.prog(), np.clip(start, self.kin.lower, self.kin.upper))
+        q = result.GetSolution(ik.q())
+        if not np.all(np.isfinite(q)):
+            return None, 0
+        q, it, _ = self._newton(X_WG.GetAsMatrix34(), q, 10, stall=None)
+        return q, it
+
     def solve(self, X_WG: RigidTransform, q_seed: np.ndarray) -> np.ndarray | None:
         q_seed = np.asarray(q_seed, float)
         M_t = X_WG.GetAsMatrix34()
         tols = (self.position_tol, self.orientation_tol)
-        iterations = 0
+        iterations = programs = 0
 
-        def attempt(q0: np.ndarray, budget: int) -> np.ndarray | None:
+        def done(stage: str, q: np.ndarray | None) -> np.ndarray | None:
+            self.last = IkStats(stage, iterations, programs)
+            return q
+
+        def newton_from(q0: np.ndarray, budget: int, stall: float | None) -> np.ndarray | None:
             nonlocal iterations
-            q, it, _ = self._newton(M_t, q0, budget, stall=self.stall)
+            q, it, _ = self._newton(M_t, q0, budget, stall)
             iterations += it
             return q if self.kin.within(q, X_WG, *tols) else None
+
+        def snopt_from(start: np.ndarray) -> np.ndarray | None:
+            nonlocal iterations, programs
+            q, it = self._snopt(X_WG, q_seed, start)
+            iterations, programs = iterations + it, programs + 1
+            return q if q is not None and self.kin.within(q, X_WG, *tols) else None
 
         seed_near = self.newton_first and (
             _pose_distance(self.kin.pose34(q_seed), M_t) <= self.near
         )
-        if seed_near and (q := attempt(q_seed, self.seed_iterations)) is not None:
-            self.last = IkStats("seed", iterations, 0)
-            return q
+        if seed_near:  # the pipeline's case: stay on the seed's branch if at all possible
+            if (q := newton_from(q_seed, self.seed_iterations, None)) is not None:
+                return done("seed", q)
+            if (q := snopt_from(q_seed)) is not None:
+                return done("snopt", q)
         nearest = self.table.nearest(M_t, max(self.table_tries, self.restarts))
         for i in nearest[: self.table_tries]:
-            if (q := attempt(self.table.q[i], self.table_iterations)) is not None:
-                self.last = IkStats("table", iterations, 0)
-                return q
+            if (q := newton_from(self.table.q[i], self.table_iterations, self.stall)) is not None:
+                return done("table", q)
         if self.newton_first and not seed_near:
-            if (q := attempt(q_seed, 3 * self.seed_iterations)) is not None:
-                self.last = IkStats("seed", iterations, 0)
-                return q
-        starts = [q_seed, Q_HOME] + [self.table.q[i] for i in nearest[: self.restarts]]
-        for programs, start in enumerate(starts, start=1):
-            ik = self._program(X_WG, q_seed)
-            result = Solve(ik.prog(), np.clip(start, self.kin.lower, self.kin.upper))
-            q = result.GetSolution(ik.q())
-            if not np.all(np.isfinite(q)):
-                continue
-            q, it, _ = self._newton(M_t, q, 10, stall=None)
-            iterations += it
-            if self.kin.within(q, X_WG, *tols):
-                self.last = IkStats("snopt", iterations, programs)
-                return q
-        self.last = IkStats("failed", iterations, len(starts))
-        return None
+            if (q := newton_from(q_seed, 3 * self.seed_iterations, None)) is not None:
+                return done("seed", q)
+        for i in nearest[: self.table_tries]:  # again, patiently: near joint limits
+            if (q := newton_from(self.table.q[i], 2 * self.table_iterations, None)) is not None:
+                return done("table", q)
+        starts = [] if seed_near else [q_seed]
+        starts += [Q_HOME] + [self.table.q[i] for i in nearest[: self.restarts]]
+        for start in starts:
+            if (q := snopt_from(start)) is not None:
+                return done("snopt", q)
+        return done("failed", None)
 
 
 #: Weight of the rotation matrix against the position (m) when comparing poses: a radian
