@@ -122,12 +122,20 @@ def test_snopt_fallback_answers_when_newton_cannot_start(kin):
 
 
 UNREACHABLE = RigidTransform(gripper_down(0.0), [1.5, 0.0, 0.1])  # 1.5 m away: beyond reach
+#: 1.0 m from the shoulder: inside the chain-length bound (1.09 m), outside the real reach
+#: (0.95 m), so every stage of DrakeIk runs and fails.
+JUST_OUT_OF_REACH = RigidTransform(gripper_down(0.0), [1.0, 0.0, 0.333])
 
 
 @pytest.mark.parametrize("name", ["drake", "dls"])
-def test_unreachable_pose_gives_none(kin, name):
+@pytest.mark.parametrize("X", [UNREACHABLE, JUST_OUT_OF_REACH], ids=["far", "just-out"])
+def test_unreachable_pose_gives_none(kin, name, X):
     solver = make_solver(name, kin)
-    assert solver.solve(UNREACHABLE, Q_HOME) is None
+    assert solver.solve(X, Q_HOME) is None
+    if name == "drake":
+        assert solver.last.stage == "failed"
+        assert kin.beyond_reach(X) == (X is UNREACHABLE)
+        assert (solver.last.programs > 0) == (X is JUST_OUT_OF_REACH)
 
 
 @pytest.mark.parametrize("name", ["drake", "dls"])

@@ -73,6 +73,15 @@ class Kinematics:
         self.mid = (self.lower + self.upper) / 2
         self.velocity_limits = self.plant.GetVelocityUpperLimits()
         self._world = self.plant.world_frame()
+        # A bound on reach: the grasp frame is never farther from the first joint's origin
+        # than the chain of joint origins is long (the links are rigid).
+        context = self.plant.CreateDefaultContext()
+        joints = [self.plant.get_joint(j) for j in self.plant.GetJointIndices()]
+        origins = [j.frame_on_child().CalcPoseInWorld(context).translation() for j in joints
+                   if j.num_positions() == 1]  # fmt: skip
+        origins.append(self.frame.CalcPoseInWorld(context).translation())
+        self.base = origins[0]
+        self.reach = float(np.sum(np.linalg.norm(np.diff(origins, axis=0), axis=1)))
 
     def pose(self, q: np.ndarray) -> RigidTransform:
         self.plant.SetPositions(self.context, q)
@@ -102,6 +111,10 @@ class Kinematics:
         M, M_t = self.pose34(q), X_WG.GetAsMatrix34()
         chord = np.linalg.norm(M[:, :3] - M_t[:, :3]) / (2 * math.sqrt(2))
         return float(np.linalg.norm(M[:, 3] - M_t[:, 3])), 2 * math.asin(min(1.0, chord))
+
+    def beyond_reach(self, X_WG: RigidTransform) -> bool:
+        """True when no configuration can put the grasp frame at ``X_WG``'s position."""
+        return float(np.linalg.norm(X_WG.translation() - self.base)) > self.reach
 
     def within_limits(self, q: np.ndarray) -> bool:
         return bool(np.all(q >= self.lower) and np.all(q <= self.upper))
@@ -254,6 +267,7 @@ class DrakeIk:
        Newton steps: Drake imposes the orientation as trace(R) >= 2cos(tol) + 1, so the
        solver's feasibility tolerance alone leaves up to ~1e-3 rad.
 
+    A position farther than the arm's chain of joints is long fails at once.
     Nothing depends on earlier queries or on the clock, so the same query always gives
     the same answer. :attr:`last` tells which stage answered.
     """
@@ -328,6 +342,9 @@ class DrakeIk:
         M_t = X_WG.GetAsMatrix34()
         tols = (self.position_tol, self.orientation_tol)
         iterations = programs = 0
+        if self.kin.beyond_reach(X_WG):
+            self.last = IkStats("failed", 0, 0)
+            return None
 
         def done(stage: str, q: np.ndarray | None) -> np.ndarray | None:
             self.last = IkStats(stage, iterations, programs)
