@@ -77,6 +77,7 @@ def main() -> None:
                     "--no-render",
                 ],
                 check=True,
+                capture_output=True,
             )
             extra = ["--reference", str(Path(replay) / "trajectory.npz")]
         runs = [one_run(mode.split()[0], args.problem, extra) for _ in range(args.repeats)]

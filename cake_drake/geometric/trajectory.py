@@ -7,7 +7,7 @@ shortest that keeps every joint within ``velocity_fraction`` of its velocity lim
 1.875 d/T in velocity and 10/sqrt(3) d/T^2 in acceleration for a distance d).
 Gripper closing and opening are holds of ``gripper_time`` seconds.
 
-``trajectory.npz`` (see :meth:`JointTrajectory.save`) holds, per sample:
+``trajectory.npz`` (see :func:`save_npz`) holds, per sample:
 ``t`` (s), ``q``, ``qd``, ``qdd`` (7 arm joints: rad, rad/s, rad/s^2), ``gripper``
 (commanded opening of each finger, m), ``phase`` (index into ``phases``), ``action``
 (index into ``actions``; -1 when idle), plus ``phases`` and ``actions`` as strings.

@@ -39,9 +39,18 @@ def phase_spans(t: np.ndarray, phase: np.ndarray) -> list[tuple[float, float, st
 
 
 def shade_phases(ax, spans) -> None:
-    """Shade each phase's time span in its colour, behind the data."""
-    for t0, t1, name in spans:
-        ax.axvspan(t0, t1, color=PHASE_COLOURS[name], lw=0, zorder=0)
+    """Shade each phase's time spans in its colour, behind the data (one artist a phase)."""
+    from matplotlib.collections import PolyCollection
+
+    transform = ax.get_xaxis_transform()  # x in data, y in axes fraction
+    for name, colour in PHASE_COLOURS.items():
+        boxes = [[(t0, 0), (t1, 0), (t1, 1), (t0, 1)] for t0, t1, n in spans if n == name]
+        if boxes:
+            ax.add_collection(
+                PolyCollection(
+                    boxes, facecolors=colour, linewidths=0, zorder=0, transform=transform
+                )
+            )
 
 
 def phase_key(fig: Figure) -> None:
@@ -101,7 +110,8 @@ def joint_plot(
     if title:
         fig.suptitle(title, y=0.99, fontsize=11)
     phase_key(fig)
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    # Fixed margins rather than tight_layout: that would draw the whole figure once more.
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.07, top=0.91, hspace=0.12)
     if path is not None:
-        fig.savefig(Path(path), dpi=110)
+        fig.savefig(Path(path), dpi=100)
     return fig
