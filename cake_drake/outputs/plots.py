@@ -113,5 +113,14 @@ def joint_plot(
     # Fixed margins rather than tight_layout: that would draw the whole figure once more.
     fig.subplots_adjust(left=0.08, right=0.98, bottom=0.07, top=0.91, hspace=0.12)
     if path is not None:
-        fig.savefig(Path(path), dpi=100)
+        # Light PNG compression: a third faster to write, a sixth larger.
+        fig.savefig(Path(path), dpi=100, pil_kwargs={"compress_level": 1})
     return fig
+
+
+def warm_up() -> None:
+    """Draw a tiny plot once, so fonts and the renderer are loaded before real work."""
+    t = np.linspace(0.0, 1.0, 5)
+    q = np.zeros((5, 7))
+    fig = joint_plot(t, q, q, q, np.zeros(5, int))
+    fig.canvas.draw()

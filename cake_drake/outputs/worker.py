@@ -48,7 +48,9 @@ def _serve(conn, blocks, warm_poses, render: bool) -> None:
 
             renderer = Renderer(blocks)
             renderer.render(_unpack(warm_poses))
-        import cake_drake.outputs.plots  # noqa: F401 - matplotlib loads now, not at the end
+        from cake_drake.outputs.plots import warm_up
+
+        warm_up()  # matplotlib and its fonts load now, not at the end
     except Exception as e:  # noqa: BLE001 - reported to the parent as one line
         conn.send(("error", f"output worker failed to start: {e}"))
         return
