@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 from collections import Counter
@@ -32,6 +30,8 @@ import numpy as np
 from pydrake.math import RigidTransform
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from machine import machine  # noqa: E402 - benchmarks/machine.py
 
 from cake_drake.geometric.collisions import CollisionChecker, action_collisions  # noqa: E402
 from cake_drake.geometric.ik import DlsIk, DrakeIk, Kinematics  # noqa: E402
@@ -58,19 +58,6 @@ from cake_drake.world.scene import Q_HOME, layout  # noqa: E402
 PROTOCOL_TOL = 1e-5  # m and rad, as TRAC-IK's published benchmark
 #: Generated problems of the tabletop set: (blocks, seed).
 GENERATED = ((5, 1), (6, 2), (6, 3), (7, 4))
-
-
-def machine() -> str:
-    cpu = "unknown CPU"
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    return f"{cpu}, {os.cpu_count()} cores, load average {load}, Python {platform.python_version()}"
 
 
 def rollout(

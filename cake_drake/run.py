@@ -331,19 +331,7 @@ def run(
 
         staged = OutputDir(out)
         try:
-            write_outputs(
-                staged,
-                problem,
-                plan,
-                cake,
-                execution,
-                success,
-                message,
-                stages,
-                worker,
-                render,
-                meshcat,
-            )
+            write_outputs(staged, problem, result, worker, render, meshcat)
             result.written = staged.commit()
         except BaseException:
             staged.discard()

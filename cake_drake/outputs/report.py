@@ -40,7 +40,9 @@ def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str
     return samples, [str(a) for a in cake.plan_source.actions]
 
 
-def summary(problem, plan, cake, execution, success, message, stages) -> dict:
+def summary(problem, result) -> dict:
+    """The content of ``summary.json`` for a :class:`cake_drake.run.RunResult`."""
+    plan, cake, execution, stages = result.plan, result.cake, result.execution, result.stages
     logs = execution.logs
     blocks = {
         name: {
@@ -51,8 +53,8 @@ def summary(problem, plan, cake, execution, success, message, stages) -> dict:
     }
     wall = sum(v for k, v in stages.items() if k != "ik")  # IK runs inside the simulation
     return {
-        "success": success,
-        "message": message,
+        "success": result.success,
+        "message": result.message,
         "mode": cake.config.mode,
         "gains": {
             "kp": np.asarray(cake.config.gains()[0]).tolist(),
@@ -95,12 +97,7 @@ def summary(problem, plan, cake, execution, success, message, stages) -> dict:
 def write_outputs(
     out: OutputDir,
     problem,
-    plan,
-    cake,
-    execution,
-    success,
-    message,
-    stages,
+    result,
     worker: OutputWorker,
     render: bool = True,
     meshcat=None,
@@ -112,6 +109,7 @@ def write_outputs(
     spent here before the summary is written.
     """
     t0 = time.perf_counter()
+    plan, cake, execution, stages = result.plan, result.cake, result.execution, result.stages
     logs = execution.logs
     if render:
         worker.submit_render(
@@ -140,6 +138,4 @@ def write_outputs(
         out.path("replay.html").write_text(meshcat.StaticHtml())
     worker.wait()
     stages["outputs"] = time.perf_counter() - t0
-    out.write_json(
-        "summary.json", summary(problem, plan, cake, execution, success, message, stages)
-    )
+    out.write_json("summary.json", summary(problem, result))
