@@ -66,7 +66,12 @@ def _show_in_meshcat(blocks, poses) -> None:
     context = diagram.CreateDefaultContext()
     set_cube_poses(scene, scene.plant.GetMyMutableContextFromRoot(context), poses)
     diagram.ForcedPublish(context)
-    input(f"Meshcat at {meshcat.web_url()}; press Enter to quit ")
+    print(f"Meshcat at {meshcat.web_url()}")
+    if sys.stdin.isatty():
+        try:
+            input("press Enter to quit ")
+        except EOFError:
+            pass
 
 
 if __name__ == "__main__":
