@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 
 from cake_drake.diagram import RunConfig
 from cake_drake.dynamic.analysis import settling
-from cake_drake.errors import EXIT_OK, ExecutionError, InputError, run_cli
+from cake_drake.errors import EXIT_OK, CliParser, ExecutionError, InputError, run_cli
 from cake_drake.outputs.files import OutputDir
 from cake_drake.run import RunResult, run
 from cake_drake.symbolic import PROBLEM_5
@@ -32,7 +32,7 @@ FINAL_HOLD_S = 1.0
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = CliParser(
         prog="python -m cake_drake.gains",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cake_drake.errors import EXIT_OK, InputError, run_cli
+from cake_drake.errors import EXIT_OK, CliParser, InputError, run_cli
 from cake_drake.symbolic import (
     BLOCKSWORLD_DOMAIN,
     DEFAULT_PLANNER,
@@ -31,16 +31,9 @@ from cake_drake.symbolic import (
 )
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports a bad command line as one line (exit 2) via InputError."""
-
-    def error(self, message: str):  # type: ignore[override]
-        raise InputError(f"{self.prog}: {message} (see --help)")
-
-
 def build_parser() -> argparse.ArgumentParser:
     planners = "\n".join(f"  {p.name:<18} {p.summary}" for p in PLANNERS.values())
-    parser = _Parser(
+    parser = CliParser(
         prog="python -m cake_drake.plan",
         description=__doc__,
         epilog=f"planners:\n{planners}",

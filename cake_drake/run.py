@@ -29,6 +29,7 @@ from cake_drake.diagram import MODES, CakeDiagram, RunConfig, build_diagram  # n
 from cake_drake.errors import (  # noqa: E402
     EXIT_EXECUTION_FAILED,
     EXIT_OK,
+    CliParser,
     InputError,
     NoPlanError,
     run_cli,
@@ -70,7 +71,7 @@ class RunResult:
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
+    p = CliParser(
         prog="python -m cake_drake.run",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,

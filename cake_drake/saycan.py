@@ -22,7 +22,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cake_drake.errors import EXIT_NO_PLAN, EXIT_OK, InputError, run_cli
+from cake_drake.errors import EXIT_NO_PLAN, EXIT_OK, CliParser, run_cli
 from cake_drake.language import (
     KITCHEN_DEFAULT,
     KITCHEN_DOMAIN,
@@ -34,13 +34,8 @@ from cake_drake.language import (
 from cake_drake.symbolic import DEFAULT_PLANNER, load_problem, planner_info
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # type: ignore[override]
-        raise InputError(f"{self.prog}: {message} (see --help)")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = CliParser(
         prog="python -m cake_drake.saycan",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -13,17 +13,12 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cake_drake.errors import EXIT_NO_PLAN, EXIT_OK, InputError, run_cli
+from cake_drake.errors import EXIT_NO_PLAN, EXIT_OK, CliParser, run_cli
 from cake_drake.symbolic import facts_str, load_problem, read_plan, validate_plan
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # type: ignore[override]
-        raise InputError(f"{self.prog}: {message} (see --help)")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+    parser = CliParser(
         prog="python -m cake_drake.validate",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,

@@ -157,3 +157,14 @@ def test_collisions_are_reported_and_avoided_on_a_crowded_table(tmp_path):
     )
     assert avoided.returncode == 0, avoided.stderr
     assert "goal reached" in avoided.stdout
+
+
+@pytest.mark.parametrize("module", ["run", "gains", "world", "plan", "validate", "saycan"])
+def test_every_cli_reports_a_bad_command_line_in_one_line(module):
+    r = subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{module}", "--no-such-flag"],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 2
+    assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr

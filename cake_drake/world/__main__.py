@@ -12,12 +12,12 @@ import argparse
 import sys
 from pathlib import Path
 
-from cake_drake.errors import EXIT_OK, InputError, run_cli
+from cake_drake.errors import EXIT_OK, CliParser, InputError, run_cli
 from cake_drake.symbolic import BLOCKSWORLD_DOMAIN, PROBLEM_5, towers
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
+    p = CliParser(
         prog="python -m cake_drake.world",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
