@@ -91,7 +91,7 @@ def _logs(cake: CakeDiagram, context) -> Logs:
     )
 
 
-class Progress:
+class ProgressBar:
     """A one-line progress bar on stderr (redrawn on a terminal, sparse lines otherwise)."""
 
     def __init__(self, n_actions: int, describe: Callable[[int], str], enabled: bool = True):
@@ -123,7 +123,7 @@ def execute(
     max_sim_s: float = 300.0,
     settle_s: float = 0.3,
     chunk_s: float = 0.25,
-    progress: Progress | None = None,
+    progress: ProgressBar | None = None,
 ) -> Execution:
     """Run the simulation to the end of the plan (or of the replayed reference)."""
     simulator = Simulator(cake.diagram)

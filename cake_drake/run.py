@@ -20,7 +20,6 @@ import time
 _T_START = time.perf_counter()
 
 import argparse  # noqa: E402
-import os  # noqa: E402
 import sys  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -34,7 +33,7 @@ from cake_drake.errors import (  # noqa: E402
     NoPlanError,
     run_cli,
 )
-from cake_drake.execution import STACK_TOL, Execution, Progress, execute  # noqa: E402
+from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute  # noqa: E402
 from cake_drake.geometric.ik import SOLVERS  # noqa: E402
 from cake_drake.symbolic import (  # noqa: E402
     BLOCKSWORLD_DOMAIN,
@@ -311,7 +310,7 @@ def run(
         stages["diagram_build"] = time.perf_counter() - t
 
         n = plan.length if config.reference is None else len(cake.reference.actions)
-        progress = Progress(
+        progress = ProgressBar(
             n, lambda k: f"({plan.actions[k]})" if k < plan.length else "", enabled=not quiet
         )
         if meshcat is not None:
@@ -373,5 +372,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    os.environ.setdefault("PYTHONHASHSEED", "0")
     sys.exit(run_cli(main))

@@ -170,7 +170,3 @@ def waypoints_for(
         f"{action}: no waypoints for action {name!r}; the geometric layer knows "
         f"{', '.join(PICK_ACTIONS + PLACE_ACTIONS)}"
     )
-
-
-def describe(waypoints: Sequence[Waypoint]) -> str:
-    return ", ".join(f"{w.phase} {np.round(w.X_WG.translation(), 3).tolist()}" for w in waypoints)
