@@ -1,94 +1,67 @@
-"""Builds the whole cake as one Drake Diagram. Nothing else in the project wires ports.
+"""Builds the whole cake as one Drake Diagram from a :class:`~cake_drake.scenario.Scenario`.
 
 ::
 
-    PlanSource --action--> WaypointIk --reference--> split --+--> controller --> plant (arm)
-        ^                      ^                             +--> plant (fingers, built-in PD)
-        |                      +------- body_poses ------------------ plant
-        +---- actions_done --- split
+    action source --action--> WaypointIk --desired_state---------> controller --> plant (arm)
+        ^                        ^    |     --desired_acceleration->
+        |                        |    +----- finger_state ----------------------> plant (fingers)
+        +---- actions_done ------|----+
+                                 +-------- body_poses ------------------------- plant
 
-The dynamic layer is chosen by :attr:`RunConfig.mode`:
-
-* ``torque`` - Drake's ``InverseDynamicsController`` (computed torque,
-  tau = M(q)(a_d + Kp e + Kd e') + C(q, v)v + g(q)) on the 7-DOF control plant;
-* ``position`` - the plant's built-in joint PD (implicit in SAP, so stable at 10 ms
-  steps) on the desired state, plus the feed-forward torque of the reference from
-  Drake's ``InverseDynamics`` (gravity included): what a position-controlled robot's
-  firmware, or PyBullet's position mode, does for you.
-
-With :attr:`RunConfig.reference` set, a recorded ``trajectory.npz`` replaces the planner
-and the IK (``TrajectorySource`` on a spline fit): the exercise's computed-torque replay.
+The reference is either planned (an action source - the planner's plan by default -
+feeding ``WaypointIk``) or a recorded ``trajectory.npz`` replayed through Drake's
+``TrajectorySource``; both have the same named output ports, so the controller and the
+loggers are wired the same way. :func:`_add_reference` is the one place that tells the
+two apart, and :func:`cake_drake.dynamic.controllers.make_controller` the one place that
+tells controllers apart. Nothing else in the project wires ports, except a controller,
+which wires its own systems between the reference's ports and the arm's inputs.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from pydrake.math import RigidTransform
-from pydrake.systems.controllers import InverseDynamics, InverseDynamicsController
-from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer, LogVectorOutput, VectorLogSink
+from pydrake.systems.framework import Diagram, DiagramBuilder, System
+from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
+from cake_drake.dynamic.controllers import Controller, make_controller
 from cake_drake.dynamic.reference import ReferenceTrajectory
-from cake_drake.errors import InputError
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import TimedSolver
-from cake_drake.geometric.trajectory import Timing
-from cake_drake.geometric.waypoints import WaypointParams
+from cake_drake.scenario import Recorded, Scenario, resolve_path
 from cake_drake.symbolic import GroundAction
-from cake_drake.systems.plan_source import PlanSource
-from cake_drake.systems.waypoint_ik import WaypointIk
-from cake_drake.world.scene import (
-    Q_HOME,
-    X_HAND_GRASP,
-    Scene,
-    WorldConfig,
-    add_world,
-    make_control_plant,
-    set_default_cube_poses,
-)
+from cake_drake.systems import make_action_source
+from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
+from cake_drake.world.scene import Q_HOME, X_HAND_GRASP, Scene, add_world, make_control_plant
 
-MODES = ("position", "torque")
-#: Built-in joint PD gains of the position mode (N m/rad, N m s/rad).
-POSITION_KP = (800.0, 800.0, 800.0, 800.0, 300.0, 200.0, 100.0)
-POSITION_KD = (80.0, 80.0, 80.0, 80.0, 30.0, 20.0, 10.0)
+#: The reference ports that are logged, with the arm's state and the torques.
+LOGGED_REFERENCE_PORTS = ("desired_state", "desired_acceleration", "finger_state", "labels")
 
 
 @dataclass
-class RunConfig:
-    """Everything that shapes one run. CLI flags only fill these in."""
+class ReferenceSource:
+    """The system that produces the reference, and how to read the run's progress from it."""
 
-    mode: str = "torque"
-    kp: float | Sequence[float] = 100.0  # torque mode, per joint (1/s^2)
-    kd: float | Sequence[float] = 20.0  # torque mode, per joint (1/s)
-    ik: str = "drake"
-    seed: int = 0
-    world: WorldConfig = field(default_factory=WorldConfig)
-    timing: Timing = field(default_factory=Timing)
-    waypoints: WaypointParams = field(default_factory=WaypointParams)
-    check_collisions: bool = True  # report moves that sweep through cubes (warnings)
-    avoid_collisions: bool = False  # raise the transit height until none is left
-    reference: Path | None = None  # replay this trajectory.npz instead of planning motion
-    differentiate: str = "spline"  # how the replay gets q-dot and q-double-dot
+    system: System  # has the named ports of cake_drake.systems.waypoint_ik.REFERENCE_PORTS
+    actions: tuple[str, ...]  # the actions it executes, by name
+    waypoint_ik: WaypointIk | None = None  # planned: the geometric layer
+    action_source: System | None = None  # planned: where the actions come from
+    replay: ReferenceTrajectory | None = None  # recorded: what is replayed
 
-    def gains(self) -> tuple[np.ndarray, np.ndarray]:
-        kp = np.broadcast_to(np.asarray(self.kp, float), (7,)).copy()
-        kd = np.broadcast_to(np.asarray(self.kd, float), (7,)).copy()
-        return kp, kd
+    def port(self, name: str):
+        return self.system.GetOutputPort(name)
 
-    def check(self) -> None:
-        if self.mode not in MODES:
-            raise InputError(f"unknown mode {self.mode!r}; choose one of: {', '.join(MODES)}")
-        try:
-            kp, kd = self.gains()
-        except ValueError:
-            raise InputError("--kp/--kd take one value or seven (one per joint)") from None
-        if np.any(kp <= 0) or np.any(kd < 0):
-            raise InputError(f"gains must be kp > 0 and kd >= 0 (got kp={kp}, kd={kd})")
+    def status(self, root_context) -> tuple[int, str | None, tuple[str, ...]]:
+        """(actions done, the error that stopped execution or None, collision warnings)."""
+        if self.waypoint_ik is not None:
+            prog = self.waypoint_ik.progress(self.waypoint_ik.GetMyContextFromRoot(root_context))
+            return prog.done, prog.error, prog.warnings
+        context = self.system.GetMyContextFromRoot(root_context)
+        return int(round(self.port("actions_done").Eval(context)[0])), None, ()
 
 
 @dataclass
@@ -97,137 +70,101 @@ class CakeDiagram:
 
     diagram: Diagram
     scene: Scene
-    config: RunConfig
-    loggers: dict[str, VectorLogSink]
-    plan_source: PlanSource | None = None
-    waypoint_ik: WaypointIk | None = None
-    reference: ReferenceTrajectory | None = None
-    control_plant: object = None
+    scenario: Scenario
+    reference: ReferenceSource
+    controller: Controller
+    loggers: dict[str, VectorLogSink] = field(default_factory=dict)
     ik: TimedSolver | None = None
-    visualizer: object = None  # MeshcatVisualizer, with --meshcat
+
+
+def _add_reference(
+    builder: DiagramBuilder,
+    scenario: Scenario,
+    scene: Scene,
+    actions: Sequence[GroundAction],
+    q_start: np.ndarray,
+) -> tuple[ReferenceSource, TimedSolver | None]:
+    """The one place that tells a planned reference from a recorded one."""
+    ref = scenario.reference
+    if isinstance(ref, Recorded):
+        replay = ReferenceTrajectory.from_npz(resolve_path(ref.path), ref.differentiate)
+        system = builder.AddNamedSystem("reference", replay.make_source())
+        return ReferenceSource(system, replay.executed_actions(), replay=replay), None
+    plant = scene.plant
+    source = builder.AddNamedSystem("action_source", make_action_source(ref.action_source, actions))
+    kinematics = Kinematics(scene.control_plant)
+    solver = TimedSolver(make_solver(scenario.motion.ik, kinematics, scenario.seed))
+    motion = scenario.motion
+    checker = CollisionChecker(list(scene.cubes)) if motion.collision_check else None
+    indices = WorldIndices(
+        cube_bodies={n: int(scene.cube_body(n).index()) for n in scene.cubes},
+        hand_body=int(plant.GetBodyByName("panda_hand", scene.hand).index()),
+        X_hand_grasp=X_HAND_GRASP,
+        slots=scenario.world.slots,
+    )
+    settings = MotionSettings(motion.timing, motion.waypoints, checker, motion.avoid_collisions)
+    waypoint_ik = builder.AddNamedSystem(
+        "waypoint_ik",
+        WaypointIk(
+            solver,
+            indices,
+            q_start,
+            kinematics.limits,
+            scenario.world.time_step,
+            settings,
+        ),
+    )
+    builder.Connect(source.GetOutputPort("action"), waypoint_ik.GetInputPort("action"))
+    builder.Connect(waypoint_ik.GetOutputPort("actions_done"), source.GetInputPort("actions_done"))
+    builder.Connect(plant.get_body_poses_output_port(), waypoint_ik.GetInputPort("body_poses"))
+    if source.HasInputPort("body_poses"):
+        builder.Connect(plant.get_body_poses_output_port(), source.GetInputPort("body_poses"))
+    names = tuple(str(a) for a in actions)
+    return ReferenceSource(waypoint_ik, names, waypoint_ik, source), solver
 
 
 def build_diagram(
-    config: RunConfig,
+    scenario: Scenario,
     blocks: Sequence[str],
     initial_poses: Mapping[str, RigidTransform],
     actions: Sequence[GroundAction] = (),
     q_start: np.ndarray = Q_HOME,
     meshcat=None,
 ) -> CakeDiagram:
-    """Wire planner, geometry and controller around the simulated Panda.
+    """Wire the action source, geometry and controller around the simulated Panda.
 
     ``meshcat`` (a ``pydrake.geometry.Meshcat``) adds a visualizer; never needed headless.
     """
-    config.check()
+    controller = make_controller(scenario.controller)
     builder = DiagramBuilder()
-    arm_gains = (POSITION_KP, POSITION_KD) if config.mode == "position" else None
-    scene = add_world(builder, blocks, config.world, arm_gains=arm_gains)
-    set_default_cube_poses(scene, initial_poses)
+    scene = add_world(
+        builder, blocks, scenario.world, controller.arm_pd_gains(), initial_poses=initial_poses
+    )
+    scene.control_plant = make_control_plant()
     plant = scene.plant
     plant.SetDefaultPositions(scene.arm, q_start)
     plant.SetDefaultPositions(scene.hand, [0.04, 0.04])
-    dt = config.world.time_step
-    control_plant = make_control_plant()
 
-    # The reference: either the planner + waypoint/IK layers, or a recorded trajectory.
-    plan_source = waypoint_ik = reference = solver = None
-    if config.reference is None:
-        plan_source = builder.AddNamedSystem("plan_source", PlanSource(actions))
-        solver = TimedSolver(make_solver(config.ik, Kinematics(control_plant)))
-        cube_bodies = {n: int(scene.cube_body(n).index()) for n in blocks}
-        hand_body = int(plant.GetBodyByName("panda_hand", scene.hand).index())
-        waypoint_ik = builder.AddNamedSystem(
-            "waypoint_ik",
-            WaypointIk(
-                solver,
-                q_start,
-                cube_bodies,
-                hand_body,
-                X_HAND_GRASP,
-                dt,
-                config.timing,
-                config.waypoints,
-                config.world.slots,
-                CollisionChecker(blocks) if config.check_collisions else None,
-                config.avoid_collisions,
-            ),
-        )
-        builder.Connect(plan_source.GetOutputPort("action"), waypoint_ik.GetInputPort("action"))
-        builder.Connect(plant.get_body_poses_output_port(), waypoint_ik.GetInputPort("body_poses"))
-        reference_port = waypoint_ik.GetOutputPort("reference")
-    else:
-        reference = ReferenceTrajectory.from_npz(config.reference, config.differentiate)
-        source = builder.AddNamedSystem("reference", reference.make_source())
-        reference_port = source.get_output_port()
-    split = builder.AddNamedSystem("split_reference", Demultiplexer([14, 7, 4, 1, 2]))
-    builder.Connect(reference_port, split.get_input_port())
-    desired_state, desired_accel, fingers, done, labels = (
-        split.get_output_port(i) for i in range(5)
+    reference, solver = _add_reference(builder, scenario, scene, actions, q_start)
+    builder.Connect(reference.port("finger_state"), plant.get_desired_state_input_port(scene.hand))
+    tau = controller.add_to(
+        builder, scene, reference.port("desired_state"), reference.port("desired_acceleration")
     )
-    if plan_source is not None:
-        builder.Connect(done, plan_source.GetInputPort("actions_done"))
-    builder.Connect(fingers, plant.get_desired_state_input_port(scene.hand))
 
-    # The dynamic layer.
-    arm_state = plant.get_state_output_port(scene.arm)
-    loggers: dict[str, VectorLogSink] = {}
-    if config.mode == "torque":
-        kp, kd = config.gains()
-        controller = builder.AddNamedSystem(
-            "inverse_dynamics_controller",
-            InverseDynamicsController(control_plant, kp, np.zeros(7), kd, True),
-        )
-        builder.Connect(arm_state, controller.get_input_port_estimated_state())
-        builder.Connect(desired_state, controller.get_input_port_desired_state())
-        builder.Connect(desired_accel, controller.get_input_port_desired_acceleration())
-        builder.Connect(
-            controller.get_output_port_control(), plant.get_actuation_input_port(scene.arm)
-        )
-        loggers["tau_commanded"] = LogVectorOutput(
-            controller.get_output_port_control(), builder, dt
-        )
-    else:
-        # Feed-forward: the torque the reference needs, M(q_d) a_d + C(q_d, v_d) v_d + g(q_d),
-        # from Drake's InverseDynamics evaluated on the *desired* state; the PD corrects.
-        feedforward = builder.AddNamedSystem(
-            "feedforward",
-            InverseDynamics(control_plant, InverseDynamics.InverseDynamicsMode.kInverseDynamics),
-        )
-        builder.Connect(desired_state, feedforward.get_input_port_estimated_state())
-        builder.Connect(desired_accel, feedforward.get_input_port_desired_acceleration())
-        builder.Connect(desired_state, plant.get_desired_state_input_port(scene.arm))
-        builder.Connect(
-            feedforward.get_output_port_generalized_force(),
-            plant.get_actuation_input_port(scene.arm),
-        )
-        loggers["tau_commanded"] = LogVectorOutput(
-            feedforward.get_output_port_generalized_force(), builder, dt
-        )
-    loggers["state"] = LogVectorOutput(arm_state, builder, dt)
-    loggers["reference"] = LogVectorOutput(reference_port, builder, dt)
-    loggers["tau_applied"] = LogVectorOutput(
-        plant.get_net_actuation_output_port(scene.arm), builder, dt
-    )
+    dt = scenario.world.time_step
+    loggers: dict[str, VectorLogSink] = {
+        "state": LogVectorOutput(plant.get_state_output_port(scene.arm), builder, dt),
+        "tau_commanded": LogVectorOutput(tau, builder, dt),
+        "tau_applied": LogVectorOutput(plant.get_net_actuation_output_port(scene.arm), builder, dt),
+    }
+    for name in LOGGED_REFERENCE_PORTS:
+        loggers[name] = LogVectorOutput(reference.port(name), builder, dt)
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
-    visualizer = None
     if meshcat is not None:
         from pydrake.visualization import AddDefaultVisualization
 
         AddDefaultVisualization(builder, meshcat)
-        visualizer = meshcat
     diagram = builder.Build()
     diagram.set_name("cake_drake")
-    return CakeDiagram(
-        diagram,
-        scene,
-        config,
-        loggers,
-        plan_source,
-        waypoint_ik,
-        reference,
-        control_plant,
-        solver,
-        visualizer,
-    )
+    return CakeDiagram(diagram, scene, scenario, reference, controller, loggers, solver)

@@ -70,24 +70,25 @@ class Execution:
 
 
 def _logs(cake: CakeDiagram, context) -> Logs:
-    def log(name):
-        return cake.loggers[name].FindLog(context)
+    data = {name: logger.FindLog(context) for name, logger in cake.loggers.items()}
+    n = min(log.data().shape[1] for log in data.values())
 
-    state, ref = log("state"), log("reference")
-    n = min(state.data().shape[1], ref.data().shape[1])
-    s, r = state.data()[:, :n], ref.data()[:, :n]
+    def rows(name: str) -> np.ndarray:
+        return data[name].data()[:, :n]
+
+    state, desired, labels = rows("state"), rows("desired_state"), rows("labels")
     return Logs(
-        t=state.sample_times()[:n],
-        q=s[:7].T,
-        v=s[7:14].T,
-        q_d=r[:7].T,
-        v_d=r[7:14].T,
-        a_d=r[14:21].T,
-        fingers_d=r[21],
-        phase=r[26].round().astype(int),
-        action=r[27].round().astype(int),
-        tau_commanded=log("tau_commanded").data()[:, :n].T,
-        tau_applied=log("tau_applied").data()[:, :n].T,
+        t=data["state"].sample_times()[:n],
+        q=state[:7].T,
+        v=state[7:14].T,
+        q_d=desired[:7].T,
+        v_d=desired[7:14].T,
+        a_d=rows("desired_acceleration").T,
+        fingers_d=rows("finger_state")[0],
+        phase=labels[0].round().astype(int),
+        action=labels[1].round().astype(int),
+        tau_commanded=rows("tau_commanded").T,
+        tau_applied=rows("tau_applied").T,
     )
 
 
@@ -119,47 +120,28 @@ class ProgressBar:
 
 def execute(
     cake: CakeDiagram,
-    n_actions: int,
     max_sim_s: float = 300.0,
     settle_s: float = 0.3,
     chunk_s: float = 0.25,
     progress: ProgressBar | None = None,
 ) -> Execution:
-    """Run the simulation to the end of the plan (or of the replayed reference)."""
+    """Run the simulation to the end of the reference's actions (or an error, or the budget)."""
     simulator = Simulator(cake.diagram)
     context = simulator.get_mutable_context()
     simulator.Initialize()
     t0 = time.perf_counter()
-    error = None
-    done = 0
-    warnings: tuple[str, ...] = ()
-    if cake.waypoint_ik is not None:
-        wik_context = cake.waypoint_ik.GetMyContextFromRoot(context)
-        t = 0.0
-        while True:
-            t += chunk_s
-            simulator.AdvanceTo(t)
-            prog = cake.waypoint_ik.progress(wik_context)
-            done = prog.done
-            warnings = prog.warnings
-            if progress:
-                progress.update(t, time.perf_counter() - t0, done)
-            if prog.error is not None:
-                error = prog.error
-                break
-            if done >= n_actions or t >= max_sim_s:
-                break
-        if error is None and done < n_actions:
-            error = f"time budget of {max_sim_s:.0f} s simulated ran out after {done} actions"
-    else:
-        end = cake.reference.end_time
-        t = 0.0
-        while t < end:
-            t = min(t + chunk_s, end)
-            simulator.AdvanceTo(t)
-            if progress:
-                progress.update(t, time.perf_counter() - t0, int(done))
-        done = n_actions
+    n_actions = len(cake.reference.actions)
+    t = 0.0
+    while True:
+        t = min(t + chunk_s, max_sim_s)
+        simulator.AdvanceTo(t)
+        done, error, warnings = cake.reference.status(context)
+        if progress:
+            progress.update(t, time.perf_counter() - t0, done)
+        if error is not None or done >= n_actions or t >= max_sim_s:
+            break
+    if error is None and done < n_actions:
+        error = f"time budget of {max_sim_s:g} s simulated ran out after {done} actions"
     simulator.AdvanceTo(context.get_time() + settle_s)
     wall = time.perf_counter() - t0
     if progress:

@@ -1,104 +1,87 @@
 """Gains study: replay one recorded trajectory through InverseDynamicsController per Kd.
 
 Exercise 4.x.3 asks what happens to tracking when the derivative gain drops from 20 to
-5. This tool replays the same reference (``--reference``, or one recorded first by a
-position-mode run) once per Kd, with the same Kp, and writes:
+5. :func:`study` replays the same reference once per Kd, with the same Kp, from a base
+scenario (its task, world and reference; a planned reference is first recorded by a
+position-mode run), and returns:
 
-* ``kd_comparison.png`` - joint 4's tracking error and torque, one trace per Kd;
-* ``gains.json`` - per Kd: RMS and max tracking error per joint (rad), settling time
-  after each waypoint, and whether the tower was built (measured from the poses).
+* the content of ``gains.json`` - per Kd: RMS and max tracking error per joint (rad),
+  settling time after each waypoint, and whether the tower was built (measured from the
+  poses);
+* the runs, for :func:`comparison_plot` (``kd_comparison.png``).
 
-Exit codes: 0 study done (whatever the towers did); 2 bad input; 3 the reference could
-not be recorded.
+``python -m cake_drake.gains`` is the command (parsing in :mod:`cake_drake.cli`).
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
+from collections.abc import Sequence
+from copy import deepcopy
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from cake_drake.diagram import RunConfig
 from cake_drake.dynamic.analysis import settling
-from cake_drake.errors import EXIT_OK, CliParser, ExecutionError, InputError, run_cli
+from cake_drake.errors import ExecutionError, InputError, run_cli
 from cake_drake.outputs.files import OutputDir
-from cake_drake.run import RunResult, run
-from cake_drake.symbolic import PROBLEM_5
+from cake_drake.pipeline import RunResult, run
+from cake_drake.scenario import ComputedTorque, JointPd, Recorded, Scenario, resolve_path
 
 FINAL_HOLD_S = 1.0
 
 
-def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = CliParser(
-        prog="python -m cake_drake.gains",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    p.add_argument("--kd", type=float, nargs="+", default=[20.0, 5.0], help="Kd values (1/s)")
-    p.add_argument("--kp", type=float, default=100.0, help="Kp for every run (1/s^2)")
-    p.add_argument(
-        "--reference",
-        type=Path,
-        default=None,
-        help="trajectory.npz to replay (default: record one in position mode)",
-    )
-    p.add_argument("--differentiate", choices=("spline", "central"), default="spline")
-    p.add_argument(
-        "--problem",
-        type=Path,
-        default=PROBLEM_5,
-        help="the problem the reference was (or is to be) recorded on (default: problem_5)",
-    )
-    p.add_argument("--out", type=Path, default=Path("outputs"), help="output folder")
-    p.add_argument("--quiet", action="store_true")
-    return p.parse_args(argv)
+def record_reference(base: Scenario, folder: Path) -> Path:
+    """Run ``base``'s task in position mode into ``folder``; its trajectory.npz."""
+    scenario = deepcopy(base)
+    scenario.controller = JointPd()
+    scenario.outputs.folder = str(folder)
+    scenario.outputs.render = False
+    scenario.visualization.meshcat = False
+    recorded = run(scenario)
+    if not recorded.success:
+        raise ExecutionError(f"recording the reference failed: {recorded.message}")
+    return folder / "trajectory.npz"
 
 
 def study(
-    kds: list[float],
-    kp: float = 100.0,
-    reference: Path | None = None,
-    differentiate: str = "spline",
-    workdir: Path | None = None,
-    problem_path: Path = PROBLEM_5,
+    base: Scenario, kds: Sequence[float], workdir: Path | None = None
 ) -> tuple[dict, dict[float, RunResult]]:
-    """Replay ``reference`` once per Kd; returns (gains.json content, results by Kd).
+    """Replay ``base``'s reference once per Kd, with the Kp of its ``ComputedTorque``.
 
-    ``reference`` must have been recorded on ``problem_path`` (the replay lays out the
-    same cubes); without one, a position-mode run of that problem records it.
+    A planned reference is first recorded by a position-mode run of the same task (into
+    ``workdir/reference``).
     """
-    if not kds or any(k < 0 for k in kds):
-        raise InputError(f"--kd needs one or more values >= 0, got {kds}")
-    if kp <= 0:
-        raise InputError(f"--kp must be > 0, got {kp}")
-    if reference is None:
-        workdir = workdir or Path("outputs")
-        recorded = run(
-            RunConfig(mode="position"),
-            problem_path=problem_path,
-            out=workdir / "reference",
-            render=False,
-        )
-        if not recorded.success:
-            raise ExecutionError(f"recording the reference failed: {recorded.message}")
-        reference = workdir / "reference" / "trajectory.npz"
+    kds = list(kds)
+    if not kds or any(not np.isfinite(k) or k < 0 for k in kds):
+        raise InputError(f"--kd needs one or more finite values >= 0, got {kds}")
+    if not isinstance(base.controller, ComputedTorque):
+        raise InputError("the gains study varies a !ComputedTorque controller's kd")
+    base.controller.check()
+    kp = base.controller.kp
+    if isinstance(base.reference, Recorded):
+        reference = resolve_path(base.reference.path)
+        differentiate = base.reference.differentiate
+    else:
+        reference = record_reference(base, (workdir or Path("outputs")) / "reference")
+        differentiate = "spline"
     results: dict[float, RunResult] = {}
     table: dict = {
-        "kp": kp,
+        "kp": kp[0] if len(kp) == 1 else kp,
         "reference": str(reference),
         "differentiate": differentiate,
         "runs": [],
     }
     for kd in kds:
-        config = RunConfig(
-            mode="torque", kp=kp, kd=kd, reference=reference, differentiate=differentiate
-        )
+        scenario = deepcopy(base)
+        scenario.controller = ComputedTorque(kp=list(kp), kd=[kd])
+        scenario.reference = Recorded(str(reference), differentiate)
         # A long final hold: the one stretch where the error can be watched decaying
         # undisturbed (the gripper holds mid-plan last 0.25 s with the fingers acting).
-        result = run(config, problem_path=problem_path, out=None, settle_s=FINAL_HOLD_S)
+        scenario.simulation.settle_s = FINAL_HOLD_S
+        scenario.visualization.meshcat = False
+        result = run(scenario, write=False)
         results[kd] = result
         logs = result.execution.logs
         err = logs.q - logs.q_d
@@ -123,6 +106,20 @@ def study(
     return table, results
 
 
+def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
+    """Run :func:`study` and write ``kd_comparison.png`` and ``gains.json`` to ``out``."""
+    table, results = study(base, kds, out)
+    staged = OutputDir(out)
+    try:
+        comparison_plot(results, staged.path("kd_comparison.png"))
+        staged.write_json("gains.json", table)
+        staged.commit()
+    except BaseException:
+        staged.discard()
+        raise
+    return table
+
+
 def comparison_plot(
     results: dict[float, RunResult], path: Path | None = None, joint: int = 4
 ) -> Figure:
@@ -145,7 +142,7 @@ def comparison_plot(
     for ax in (ax_e, ax_t):
         ax.set_xlabel("time [s]")
         ax.legend(loc="lower right", fontsize=8)
-    kp = next(iter(results.values())).cake.config.gains()[0][j]
+    kp = next(iter(results.values())).cake.controller.gains()[0][j]
     fig.suptitle(f"Computed torque, Kp = {kp:g}: tracking error and torque as Kd changes", y=0.99)
     phase_key(fig)
     fig.tight_layout(rect=(0, 0, 1, 0.88))
@@ -171,26 +168,7 @@ def format_table(table: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    if args.reference is not None and not args.reference.is_file():
-        raise InputError(f"{args.reference}: no such file (expected a trajectory.npz from a run)")
-    table, results = study(
-        args.kd, args.kp, args.reference, args.differentiate, args.out, args.problem
-    )
-    out = OutputDir(args.out)
-    try:
-        comparison_plot(results, out.path("kd_comparison.png"))
-        out.write_json("gains.json", table)
-        out.commit()
-    except BaseException:
-        out.discard()
-        raise
-    print(format_table(table))
-    if not args.quiet:
-        print(f"wrote {args.out}/kd_comparison.png and {args.out}/gains.json", file=sys.stderr)
-    return EXIT_OK
-
-
 if __name__ == "__main__":
-    sys.exit(run_cli(main))
+    from cake_drake.cli import main_gains
+
+    sys.exit(run_cli(main_gains))

@@ -4,8 +4,9 @@ The exercise's computed-torque drill drives the arm from the positions recorded 
 position run; velocity and acceleration have to be recovered. ``spline`` fits a cubic
 with continuous second derivative through the samples (zero velocity at both ends) and
 differentiates it; ``central`` takes central differences of the samples, once and
-twice. The result is the same 28-vector ``WaypointIk`` emits, served by Drake's
-``TrajectorySource``.
+twice. :meth:`ReferenceTrajectory.make_source` serves it with Drake's
+``TrajectorySource`` behind the same named ports ``WaypointIk`` has, so the controller
+and the loggers cannot tell a replay from a planned run.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.systems.primitives import TrajectorySource
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import Demultiplexer, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from cake_drake.errors import InputError
@@ -72,10 +74,25 @@ class ReferenceTrajectory:
             tuple(str(s) for s in data.get("actions", ())),
         )
 
+    def executed_actions(self) -> tuple[str, ...]:
+        """The actions the recording carries out (those with samples), in order."""
+        indices = sorted({int(k) for k in self.action if k >= 0})
+        return tuple(
+            self.actions[k] if k < len(self.actions) else f"action {k + 1}" for k in indices
+        )
+
+    def actions_done(self) -> np.ndarray:
+        """At each sample, how many actions have ended (their last sample is behind)."""
+        last = {}
+        for i, k in enumerate(self.action):
+            if k >= 0:
+                last[int(k)] = i
+        ends = np.sort(np.array(list(last.values()), dtype=int))
+        return np.searchsorted(ends, np.arange(len(self.t)), side="right").astype(float)
+
     def matrix(self) -> np.ndarray:
-        """The 28 x N reference: q, v, a, finger state, done (0), phase, action."""
-        n = len(self.t)
-        g = self.gripper.reshape(n)
+        """The rows of every named port, stacked: q, v, a, finger state, done, phase, action."""
+        g = self.gripper.reshape(len(self.t))
         return np.vstack(
             [
                 self.q.T,
@@ -83,15 +100,27 @@ class ReferenceTrajectory:
                 self.qdd.T,
                 g,
                 g,
-                np.zeros(n),
-                np.zeros(n),
-                np.zeros(n),
+                np.zeros_like(g),
+                np.zeros_like(g),
+                self.actions_done(),
                 self.phase.astype(float),
                 self.action.astype(float),
             ]
         )
 
-    def make_source(self) -> TrajectorySource:
-        """Drake's ``TrajectorySource`` over a first-order hold of :meth:`matrix`."""
+    def make_source(self) -> Diagram:
+        """``TrajectorySource`` over a first-order hold, exported as the named ports
+        ``desired_state``, ``desired_acceleration``, ``finger_state``, ``actions_done`` and
+        ``labels`` (the ones ``WaypointIk`` has)."""
+        from cake_drake.systems.waypoint_ik import REFERENCE_PORTS
+
+        builder = DiagramBuilder()
         traj = PiecewisePolynomial.FirstOrderHold(self.t, self.matrix())
-        return TrajectorySource(traj, 0, True)
+        source = builder.AddNamedSystem("trajectory", TrajectorySource(traj, 0, True))
+        split = builder.AddNamedSystem("split", Demultiplexer(list(REFERENCE_PORTS.values())))
+        builder.Connect(source.get_output_port(), split.get_input_port())
+        for i, name in enumerate(REFERENCE_PORTS):
+            builder.ExportOutput(split.get_output_port(i), name)
+        diagram = builder.Build()
+        diagram.set_name("recorded_reference")
+        return diagram

@@ -30,7 +30,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import Solve
 
-from cake_drake.errors import InputError
+from cake_drake.geometric.trajectory import JointLimits
+from cake_drake.plugins import require, resolve
 from cake_drake.world.scene import Q_HOME, make_control_plant
 
 #: Default tolerances every solution is checked against, whatever the solver.
@@ -82,6 +83,11 @@ class Kinematics:
         origins.append(self.frame.CalcPoseInWorld(context).translation())
         self.base = origins[0]
         self.reach = float(np.sum(np.linalg.norm(np.diff(origins, axis=0), axis=1)))
+
+    @property
+    def limits(self) -> JointLimits:
+        """The arm's velocity and acceleration limits, as the plant has them."""
+        return JointLimits.from_plant(self.plant)
 
     def pose(self, q: np.ndarray) -> RigidTransform:
         self.plant.SetPositions(self.context, q)
@@ -419,15 +425,18 @@ class _PoseTable:
         return idx[np.argsort(d[idx], kind="stable")]
 
 
-SOLVERS = {"drake": DrakeIk, "dls": DlsIk}
+#: IK solvers by name, each a factory ``(kinematics, seed) -> IkSolver``; a scenario names
+#: one of these or a factory of its own as ``module:attribute`` (see :func:`make_solver`).
+SOLVERS = {
+    "drake": lambda kinematics, seed: DrakeIk(kinematics, seed=seed),
+    "dls": lambda kinematics, seed: DlsIk(kinematics),  # deterministic: nothing to seed
+}
 
 
-def make_solver(name: str, kinematics: Kinematics | None = None, **options) -> IkSolver:
-    """The IK solver registered as ``name`` (``drake`` or ``dls``), built with ``options``."""
-    try:
-        cls = SOLVERS[name]
-    except KeyError:
-        raise InputError(
-            f"unknown IK solver {name!r}; choose one of: {', '.join(SOLVERS)}"
-        ) from None
-    return cls(kinematics, **options)
+def make_solver(spec: str, kinematics: Kinematics | None = None, seed: int = 0) -> IkSolver:
+    """The IK solver ``spec`` names: ``drake``, ``dls`` or ``module:attribute`` of a factory
+    ``(kinematics, seed) -> IkSolver``; the result is checked for ``name`` and ``solve``."""
+    factory = resolve(spec, SOLVERS, "IK solver")
+    solver = factory(kinematics or Kinematics(), seed)
+    require(solver, spec, "IK solver", ("name", "solve"))
+    return solver

@@ -3,7 +3,8 @@
 Each move is a quintic (minimum-jerk) blend from rest to rest, so velocity and
 acceleration are zero at every waypoint and the jerk is bounded. Its duration is the
 shortest that keeps every joint within ``velocity_fraction`` of its velocity limit and
-``acceleration_fraction`` of its acceleration limit (the quintic peaks at
+``acceleration_fraction`` of its acceleration limit (both read from the plant, which has
+them from the robot's URDF) (the quintic peaks at
 1.875 d/T in velocity and 10/sqrt(3) d/T^2 in acceleration for a distance d).
 Gripper closing and opening are holds of ``gripper_time`` seconds.
 
@@ -12,8 +13,6 @@ Gripper closing and opening are holds of ``gripper_time`` seconds.
 (commanded opening of each finger, m), ``phase`` (index into ``phases``), ``action``
 (index into ``actions``; -1 when idle), plus ``phases`` and ``actions`` as strings.
 """
-
-from __future__ import annotations
 
 import bisect
 import zipfile
@@ -24,9 +23,6 @@ import numpy as np
 
 from cake_drake.errors import InputError
 
-#: Franka's datasheet limits.
-PANDA_VELOCITY = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])  # rad/s
-PANDA_ACCELERATION = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])  # rad/s^2
 GRIPPER_OPEN = 0.04  # m per finger (8 cm between the fingers)
 GRIPPER_CLOSED = 0.0  # commanded shut: the cube stops the fingers, the PD squeezes
 PHASE_NAMES = ("idle", "pre-grasp", "grasp", "lift", "transport", "place", "retract")
@@ -36,11 +32,28 @@ _A_PEAK = 10.0 / np.sqrt(3.0)  # quintic: peak of |d2s/dtau2|
 
 
 @dataclass(frozen=True)
+class JointLimits:
+    """The arm's velocity and acceleration limits (per joint), read from the plant."""
+
+    velocity: np.ndarray  # rad/s
+    acceleration: np.ndarray  # rad/s^2
+
+    @classmethod
+    def from_plant(cls, plant) -> "JointLimits":
+        """The limits the robot's model declares (the URDF's ``velocity`` and
+        ``drake:acceleration``), for the plant's joints in order."""
+        return cls(
+            np.asarray(plant.GetVelocityUpperLimits(), float).copy(),
+            np.asarray(plant.GetAccelerationUpperLimits(), float).copy(),
+        )
+
+
+@dataclass
 class Timing:
-    """How fast the arm may move.
+    """How fast the arm may move (the ``motion.timing`` section of a scenario).
 
     Free-space moves (pre-grasp, lift, transport) use ``velocity_fraction`` and
-    ``acceleration_fraction`` of the datasheet limits; the moves that start or end
+    ``acceleration_fraction`` of the robot's limits; the moves that start or end
     beside a cube or a tower (grasp, place, retract) are ``gentle`` times that, so an
     overshoot there stays small.
     """
@@ -48,16 +61,18 @@ class Timing:
     velocity_fraction: float = 0.8
     acceleration_fraction: float = 0.7
     gentle: float = 0.7
-    gentle_phases: tuple[str, ...] = ("grasp", "place", "retract")
+    gentle_phases: list[str] = field(default_factory=lambda: ["grasp", "place", "retract"])
     min_move: float = 0.2  # s, shortest move
     gripper_time: float = 0.2  # s, a close or an open (the fingers' 0.2 m/s limit)
     settle_time: float = 0.05  # s, still before the fingers close or open
 
-    def move_duration(self, q0: np.ndarray, q1: np.ndarray, phase: str = "transport") -> float:
+    def move_duration(
+        self, q0: np.ndarray, q1: np.ndarray, limits: JointLimits, phase: str = "transport"
+    ) -> float:
         scale = self.gentle if phase in self.gentle_phases else 1.0
         d = np.abs(np.asarray(q1) - np.asarray(q0))
-        t_v = _V_PEAK * d / (scale * self.velocity_fraction * PANDA_VELOCITY)
-        t_a = np.sqrt(_A_PEAK * d / (scale * self.acceleration_fraction * PANDA_ACCELERATION))
+        t_v = _V_PEAK * d / (scale * self.velocity_fraction * limits.velocity)
+        t_a = np.sqrt(_A_PEAK * d / (scale * self.acceleration_fraction * limits.acceleration))
         return float(max(self.min_move, t_v.max(), t_a.max()))
 
 
@@ -86,20 +101,24 @@ def _quintic(tau: float) -> tuple[float, float, float]:
 
 @dataclass
 class JointTrajectory:
-    """A sequence of timed segments, appended as the plan unfolds."""
+    """A sequence of timed segments, appended as the plan unfolds.
+
+    Moves are timed against ``limits`` (the arm's, from the plant).
+    """
 
     start_q: np.ndarray
+    limits: JointLimits
     start_time: float = 0.0
     segments: list[Segment] = field(default_factory=list)
     _starts: list[float] = field(default_factory=list)
 
-    def copy(self) -> JointTrajectory:
+    def copy(self) -> "JointTrajectory":
         """A new trajectory sharing the (immutable) segments, to append to."""
         return JointTrajectory(
-            self.start_q, self.start_time, list(self.segments), list(self._starts)
+            self.start_q, self.limits, self.start_time, list(self.segments), list(self._starts)
         )
 
-    def assign(self, other: JointTrajectory) -> None:
+    def assign(self, other: "JointTrajectory") -> None:
         """Take ``other``'s segments (a copy of this one, extended)."""
         self.segments[:] = other.segments
         self._starts[:] = other._starts
@@ -134,7 +153,11 @@ class JointTrajectory:
     def move(self, q1, phase: str, action: int, timing: Timing) -> None:
         """Quintic move from the current end to ``q1``; the gripper keeps its command."""
         self._append(
-            timing.move_duration(self.end_q, q1, phase), q1, phase, action, self.end_gripper
+            timing.move_duration(self.end_q, q1, self.limits, phase),
+            q1,
+            phase,
+            action,
+            self.end_gripper,
         )
 
     def hold(self, duration: float, phase: str, action: int, gripper: float | None = None) -> None:

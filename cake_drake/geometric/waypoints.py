@@ -21,8 +21,6 @@ The gripper points down; its yaw follows the cube's yaw modulo 90 degrees, choos
 turn nearest to the direction from the robot base (where the wrist is comfortable).
 """
 
-from __future__ import annotations
-
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -39,9 +37,9 @@ PLACE_ACTIONS = ("put-down", "stack")
 PHASES = ("pre-grasp", "grasp", "lift", "transport", "place", "retract")
 
 
-@dataclass(frozen=True)
+@dataclass
 class WaypointParams:
-    """Distances that shape the motion (metres)."""
+    """Distances that shape the motion, metres (the ``motion.waypoints`` scenario section)."""
 
     approach: float = 0.06  # pre-grasp and retract: this far above grasp/place
     transit_clearance: float = 0.05  # held cube's bottom this far above every tower

@@ -10,6 +10,7 @@ from pydrake.math import RollPitchYaw
 from cake_drake.geometric.trajectory import save_npz
 from cake_drake.outputs.files import OutputDir
 from cake_drake.outputs.worker import OutputWorker
+from cake_drake.scenario import dump_scenario
 from cake_drake.symbolic import fact_str, write_plan
 
 
@@ -35,14 +36,13 @@ def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str
         "phase": logs.phase.astype(np.int16),
         "action": logs.action.astype(np.int16),
     }
-    if cake.reference is not None:
-        return samples, list(cake.reference.actions)
-    return samples, [str(a) for a in cake.plan_source.actions]
+    return samples, list(cake.reference.actions)
 
 
-def summary(problem, result) -> dict:
-    """The content of ``summary.json`` for a :class:`cake_drake.run.RunResult`."""
+def summary(result) -> dict:
+    """The content of ``summary.json`` for a :class:`cake_drake.pipeline.RunResult`."""
     plan, cake, execution, stages = result.plan, result.cake, result.execution, result.stages
+    problem, scenario, controller = result.problem, cake.scenario, cake.controller
     logs = execution.logs
     blocks = {
         name: {
@@ -55,15 +55,14 @@ def summary(problem, result) -> dict:
     return {
         "success": result.success,
         "message": result.message,
-        "mode": cake.config.mode,
-        "gains": {
-            "kp": np.asarray(cake.config.gains()[0]).tolist(),
-            "kd": np.asarray(cake.config.gains()[1]).tolist(),
-        }
-        if cake.config.mode == "torque"
-        else "built-in joint PD + inverse-dynamics feed-forward",
-        "ik": cake.config.ik if cake.reference is None else None,
-        "reference": str(cake.config.reference) if cake.config.reference else None,
+        "mode": controller.name,
+        "controller": {
+            "name": controller.name,
+            "gains": _gains(controller),
+        },
+        "ik": scenario.motion.ik if cake.ik is not None else None,
+        "reference": getattr(scenario.reference, "path", None),
+        "scenario": "scenario.yaml",
         "problem": problem.problem_path,
         "goal": [fact_str(f) for f in sorted(problem.goal)],
         "plan": [str(a) for a in plan.actions],
@@ -94,9 +93,17 @@ def summary(problem, result) -> dict:
     }
 
 
+def _gains(controller) -> dict | None:
+    """Per-joint gains of a controller that has them (the shipped ones do)."""
+    gains = getattr(controller, "gains", None)
+    if gains is None:
+        return None
+    kp, kd = gains()
+    return {"kp": np.asarray(kp).tolist(), "kd": np.asarray(kd).tolist()}
+
+
 def write_outputs(
     out: OutputDir,
-    problem,
     result,
     worker: OutputWorker,
     render: bool = True,
@@ -115,8 +122,11 @@ def write_outputs(
         worker.submit_render(
             execution.poses, execution.q_final, execution.fingers_final, out.path("final_state.png")
         )
-    torque_mode = cake.config.mode == "torque"
-    kp, kd = cake.config.gains()
+    controller = cake.controller
+    # With the plant's built-in PD the torque that acts is the net actuation; otherwise
+    # it is what the controller commands.
+    torque_mode = controller.arm_pd_gains() is None
+    gains = _gains(controller)
     worker.submit_plot(
         t=logs.t,
         q=logs.q,
@@ -124,12 +134,15 @@ def write_outputs(
         tau=logs.tau_commanded if torque_mode else logs.tau_applied,
         phase=logs.phase,
         path=out.path("joint4_torque.png"),
-        title=f"joint 4 (elbow), {cake.config.mode} mode"
-        + (f", Kp={kp[3]:g} Kd={kd[3]:g}" if torque_mode else ""),
+        title=f"joint 4 (elbow), {controller.name} controller"
+        + (f", Kp={gains['kp'][3]:g} Kd={gains['kd'][3]:g}" if torque_mode and gains else ""),
         tau_label="τ commanded" if torque_mode else "τ applied",
-        extra_tau=[(gravity_torques(cake.control_plant, logs.q), "g(q): static gravity term")],
+        extra_tau=[
+            (gravity_torques(cake.scene.control_plant, logs.q), "g(q): static gravity term")
+        ],
     )
     write_plan(plan, out.path("plan.txt"))
+    out.path("scenario.yaml").write_text(dump_scenario(cake.scenario))
     samples, actions = trajectory_samples(cake, execution)
     save_npz(out.path("trajectory.npz"), samples, actions)
     if meshcat is not None:
@@ -138,4 +151,4 @@ def write_outputs(
         out.path("replay.html").write_text(meshcat.StaticHtml())
     worker.wait()
     stages["outputs"] = time.perf_counter() - t0
-    out.write_json("summary.json", summary(problem, result))
+    out.write_json("summary.json", summary(result))

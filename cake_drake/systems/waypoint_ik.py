@@ -14,21 +14,39 @@ from cake_drake.errors import ExecutionError
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import IkSolver
 from cake_drake.geometric.solve import solve_action
-from cake_drake.geometric.trajectory import JointTrajectory, Timing
+from cake_drake.geometric.trajectory import JointLimits, JointTrajectory, Timing
 from cake_drake.geometric.waypoints import PICK_ACTIONS, WaypointParams, WorldView
 from cake_drake.systems.plan_source import ActionCommand
-from cake_drake.world.scene import SLOTS
 
-#: Layout of the ``reference`` output vector.
-REFERENCE_SLICES = {
-    "q": slice(0, 7),
-    "v": slice(7, 14),
-    "a": slice(14, 21),
-    "fingers": slice(21, 25),  # desired finger state: q1, q2, v1, v2
-    "done": slice(25, 26),
-    "labels": slice(26, 28),  # phase index, action index
+#: Sizes of the named output ports every reference source has (``WaypointIk`` and the
+#: recorded replay alike).
+REFERENCE_PORTS = {
+    "desired_state": 14,  # q_d (7), v_d (7)
+    "desired_acceleration": 7,  # a_d
+    "finger_state": 4,  # desired finger state: q1, q2, v1, v2
+    "actions_done": 1,
+    "labels": 2,  # phase index, action index (-1 when idle)
 }
-REFERENCE_SIZE = 28
+
+
+@dataclass(frozen=True)
+class WorldIndices:
+    """Where ``WaypointIk`` finds things in the plant's ``body_poses`` output."""
+
+    cube_bodies: Mapping[str, int]  # block name -> body index
+    hand_body: int
+    X_hand_grasp: RigidTransform  # grasp frame in the hand body's frame
+    slots: tuple[tuple[float, float], ...]  # table slots (x, y) for put-down
+
+
+@dataclass(frozen=True)
+class MotionSettings:
+    """How ``WaypointIk`` turns waypoints into moves (the scenario's ``motion`` section)."""
+
+    timing: Timing
+    waypoints: WaypointParams
+    checker: CollisionChecker | None = None  # report moves that sweep through cubes
+    avoid_collisions: bool = False
 
 
 @dataclass(frozen=True)
@@ -56,13 +74,18 @@ class WaypointIk(LeafSystem):
         - action
         - body_poses
         output_ports:
-        - reference
+        - desired_state
+        - desired_acceleration
+        - finger_state
+        - actions_done
+        - labels
 
     When ``action`` names an action it has not started, it reads the cube and gripper
     poses from ``body_poses`` (the plant's), computes the waypoints, solves IK and
-    appends the moves (:func:`cake_drake.geometric.solve.solve_action`). ``reference``
-    is [q_d (7), v_d (7), a_d (7), finger q_d (2), finger v_d (2), actions done,
-    phase index, action index]; an action counts as done when its trajectory has run
+    appends the moves (:func:`cake_drake.geometric.solve.solve_action`). The outputs
+    are the arm's desired state [q_d, v_d] and acceleration a_d, the fingers' desired
+    state [q1, q2, v1, v2], the number of actions done, and [phase index, action index]
+    (see :data:`REFERENCE_PORTS`); an action counts as done when its trajectory has run
     out. An IK failure stops execution and is kept in the state (``Progress.error``);
     collisions found along the planned moves (with a ``checker``) are kept as warnings.
     """
@@ -70,44 +93,39 @@ class WaypointIk(LeafSystem):
     def __init__(
         self,
         ik: IkSolver,
+        world: WorldIndices,
         q_start: np.ndarray,
-        cube_bodies: Mapping[str, int],
-        hand_body: int,
-        X_hand_grasp: RigidTransform,
+        limits: JointLimits,
         period: float,
-        timing: Timing = Timing(),
-        params: WaypointParams = WaypointParams(),
-        slots: tuple[tuple[float, float], ...] = SLOTS,
-        checker: CollisionChecker | None = None,
-        avoid_collisions: bool = False,
+        motion: MotionSettings,
     ) -> None:
         super().__init__()
-        self._slots = tuple(slots)
-        self._checker = checker
-        self._avoid = avoid_collisions
         self._ik = ik
-        self._cubes = dict(cube_bodies)
-        self._hand = int(hand_body)
-        self._X_HG = X_hand_grasp
-        self._timing = timing
-        self._params = params
+        self._indices = world
+        self._motion = motion
         self._action_port = self.DeclareAbstractInputPort(
             "action", AbstractValue.Make(ActionCommand(0, None))
         )
         self._poses_port = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()])
         )
-        initial = Progress(JointTrajectory(np.asarray(q_start, float)))
+        initial = Progress(JointTrajectory(np.asarray(q_start, float), limits))
         self._state_index = self.DeclareAbstractState(AbstractValue.Make(initial))
+        state = {self.abstract_state_ticket(self._state_index)}
+        timed = state | {self.time_ticket()}
         self.DeclareVectorOutputPort(
-            "reference",
-            REFERENCE_SIZE,
-            self._calc_reference,
-            prerequisites_of_calc={
-                self.time_ticket(),
-                self.abstract_state_ticket(self._state_index),
-            },
+            "desired_state", 14, self._calc_desired_state, prerequisites_of_calc=timed
         )
+        self.DeclareVectorOutputPort(
+            "desired_acceleration", 7, self._calc_acceleration, prerequisites_of_calc=timed
+        )
+        self.DeclareVectorOutputPort(
+            "finger_state", 4, self._calc_finger_state, prerequisites_of_calc=timed
+        )
+        self.DeclareVectorOutputPort(
+            "actions_done", 1, self._calc_actions_done, prerequisites_of_calc=state
+        )
+        self.DeclareVectorOutputPort("labels", 2, self._calc_labels, prerequisites_of_calc=timed)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
     def progress(self, context) -> Progress:
@@ -115,8 +133,9 @@ class WaypointIk(LeafSystem):
 
     def _world(self, context, held: str | None) -> WorldView:
         poses = self._poses_port.Eval(context)
-        cubes = {name: poses[i] for name, i in self._cubes.items()}
-        return WorldView(cubes, poses[self._hand] @ self._X_HG, held, self._slots)
+        w = self._indices
+        cubes = {name: poses[i] for name, i in w.cube_bodies.items()}
+        return WorldView(cubes, poses[w.hand_body] @ w.X_hand_grasp, held, w.slots)
 
     def _update(self, context, state) -> None:
         prog: Progress = context.get_abstract_state(self._state_index).get_value()
@@ -135,6 +154,7 @@ class WaypointIk(LeafSystem):
         if t > traj.end_time:
             traj.hold(t - traj.end_time, "idle", -1)
         held = cmd.action.args[0] if cmd.action.name in PICK_ACTIONS else None
+        m = self._motion
         try:
             motion = solve_action(
                 cmd.action,
@@ -142,10 +162,10 @@ class WaypointIk(LeafSystem):
                 self._world(context, prog.held),
                 self._ik,
                 traj,
-                self._timing,
-                self._params,
-                self._checker,
-                self._avoid,
+                m.timing,
+                m.waypoints,
+                m.checker,
+                m.avoid_collisions,
             )
             warnings = prog.warnings + tuple(motion.warnings(cmd.index, cmd.action))
             new = replace(prog, trajectory=traj, working=cmd.index, held=held, warnings=warnings)
@@ -153,12 +173,24 @@ class WaypointIk(LeafSystem):
             new = replace(prog, working=-1, error=str(e))
         state.get_mutable_abstract_state(self._state_index).set_value(new)
 
-    def _calc_reference(self, context, output) -> None:
-        prog: Progress = context.get_abstract_state(self._state_index).get_value()
-        t = context.get_time()
-        q, v, a = prog.trajectory.evaluate(t)
-        g, g_rate, phase, action = prog.trajectory.labels(t)
+    def _trajectory(self, context) -> JointTrajectory:
+        return context.get_abstract_state(self._state_index).get_value().trajectory
+
+    def _calc_desired_state(self, context, output) -> None:
+        q, v, _ = self._trajectory(context).evaluate(context.get_time())
         out = output.get_mutable_value()
-        out[0:7], out[7:14], out[14:21] = q, v, a
-        out[21:25] = (g, g, g_rate, g_rate)
-        out[25:28] = (prog.done, phase, action)
+        out[:7], out[7:] = q, v
+
+    def _calc_acceleration(self, context, output) -> None:
+        output.SetFromVector(self._trajectory(context).evaluate(context.get_time())[2])
+
+    def _calc_finger_state(self, context, output) -> None:
+        g, rate, _, _ = self._trajectory(context).labels(context.get_time())
+        output.SetFromVector([g, g, rate, rate])
+
+    def _calc_actions_done(self, context, output) -> None:
+        output.SetAtIndex(0, self.progress(context).done)
+
+    def _calc_labels(self, context, output) -> None:
+        _, _, phase, action = self._trajectory(context).labels(context.get_time())
+        output.SetFromVector([phase, action])

@@ -40,16 +40,17 @@ MASS = {
 }  # fmt: skip
 
 # Joint origins (parent frame) and datasheet limits: lower, upper (rad), velocity (rad/s),
-# effort (N m). The kinematics are Franka's modified-DH values.
+# effort (N m), acceleration (rad/s^2, as drake:acceleration, which Drake's parser reads
+# into the plant). The kinematics are Franka's modified-DH values.
 JOINTS = [
-    # xyz,                  rpy,            lower,   upper,   vel,   effort
-    ((0, 0, 0.333),      (0, 0, 0),         -2.8973, 2.8973, 2.175, 87.0),
-    ((0, 0, 0),          (-np.pi / 2, 0, 0), -1.7628, 1.7628, 2.175, 87.0),
-    ((0, -0.316, 0),     (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.175, 87.0),
-    ((0.0825, 0, 0),     (np.pi / 2, 0, 0), -3.0718, -0.0698, 2.175, 87.0),
-    ((-0.0825, 0.384, 0), (-np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0),
-    ((0, 0, 0),          (np.pi / 2, 0, 0), -0.0175, 3.7525, 2.61, 12.0),
-    ((0.088, 0, 0),      (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0),
+    # xyz,                  rpy,            lower,   upper,   vel,   effort, accel
+    ((0, 0, 0.333),      (0, 0, 0),         -2.8973, 2.8973, 2.175, 87.0, 15.0),
+    ((0, 0, 0),          (-np.pi / 2, 0, 0), -1.7628, 1.7628, 2.175, 87.0, 7.5),
+    ((0, -0.316, 0),     (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.175, 87.0, 10.0),
+    ((0.0825, 0, 0),     (np.pi / 2, 0, 0), -3.0718, -0.0698, 2.175, 87.0, 12.5),
+    ((-0.0825, 0.384, 0), (-np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0, 15.0),
+    ((0, 0, 0),          (np.pi / 2, 0, 0), -0.0175, 3.7525, 2.61, 12.0, 20.0),
+    ((0.088, 0, 0),      (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0, 20.0),
 ]  # fmt: skip
 
 # Visual meshes: the detailed ones where the wheel has them. Links 0 and 7 have none; their
@@ -129,13 +130,14 @@ def arm() -> str:
         out.append(f'  <link name="panda_{name}">\n')
         out.append(inertial(name) + visual(name) + convex_collision(name))
         out.append("  </link>\n")
-    for i, (xyz, rpy, lo, hi, vel, effort) in enumerate(JOINTS, start=1):
+    for i, (xyz, rpy, lo, hi, vel, effort, acc) in enumerate(JOINTS, start=1):
         out.append(
             f'  <joint name="panda_joint{i}" type="revolute">\n'
             f'    <origin xyz="{_fmt(xyz)}" rpy="{_fmt(rpy)}"/>\n'
             f'    <parent link="panda_link{i - 1}"/>\n    <child link="panda_link{i}"/>\n'
             f'    <axis xyz="0 0 1"/>\n'
-            f'    <limit lower="{lo}" upper="{hi}" velocity="{vel}" effort="{effort}"/>\n'
+            f'    <limit lower="{lo}" upper="{hi}" velocity="{vel}" effort="{effort}"\n'
+            f'           drake:acceleration="{acc}"/>\n'
             f"  </joint>\n"
             f'  <transmission name="panda_transmission{i}" type="SimpleTransmission">\n'
             f'    <joint name="panda_joint{i}"/>\n    <actuator name="panda_motor{i}"/>\n'

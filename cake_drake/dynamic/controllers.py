@@ -1,0 +1,184 @@
+"""The dynamic layer's door: controller configs, and the one place a controller is chosen.
+
+A controller is anything with the :class:`Controller` protocol: a ``name``, the gains it
+wants on the plant's built-in (implicit) joint PD, if any, and ``add_to``, which adds its
+systems to the builder and wires them from the reference's named ports to the arm's
+actuation input. Two ship, each its own config type (the scenario's ``controller:``
+section, chosen by YAML tag):
+
+* :class:`ComputedTorque` (``!ComputedTorque``, ``--mode torque``) - Drake's
+  ``InverseDynamicsController`` on the 7-DOF control plant:
+  tau = M(q)(a_d + Kp e + Kd e') + C(q, v)v + g(q), gains in 1/s^2 and 1/s.
+* :class:`JointPd` (``!JointPd``, ``--mode position``) - the plant's built-in joint PD on
+  the desired state (implicit in SAP, so stable at 10 ms steps; gains in N m/rad and
+  N m s/rad) plus the reference's inverse-dynamics feed-forward from Drake's
+  ``InverseDynamics``: what a position-controlled robot's firmware does for you.
+
+:class:`CustomController` (``!CustomController``) names a factory of the user's,
+``module:attribute``, called with the config's ``options``; :func:`make_controller` is the
+only function that tells the kinds apart.
+"""
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar, Protocol
+
+import numpy as np
+from pydrake.systems.controllers import InverseDynamics, InverseDynamicsController
+from pydrake.systems.framework import DiagramBuilder, OutputPort
+
+from cake_drake.errors import InputError
+from cake_drake.plugins import load_attribute, require
+from cake_drake.world.scene import Scene
+
+#: Built-in joint PD gains of the position controller (N m/rad, N m s/rad).
+POSITION_KP = (800.0, 800.0, 800.0, 800.0, 300.0, 200.0, 100.0)
+POSITION_KD = (80.0, 80.0, 80.0, 80.0, 30.0, 20.0, 10.0)
+
+
+class Controller(Protocol):
+    """What the Diagram needs from a controller."""
+
+    name: str
+
+    def arm_pd_gains(self) -> tuple[Sequence[float], Sequence[float]] | None:
+        """(kp, kd) per arm joint for the plant's built-in PD, or None to leave it off.
+
+        Asked before the plant is finalized; with gains, the plant's desired-state input
+        for the arm must be connected by :meth:`add_to`.
+        """
+        ...
+
+    def add_to(
+        self,
+        builder: DiagramBuilder,
+        scene: Scene,
+        desired_state: OutputPort,
+        desired_acceleration: OutputPort,
+    ) -> OutputPort:
+        """Add and wire the controller; return the port of the torque it commands (logged)."""
+        ...
+
+
+def per_joint(values: Sequence[float], what: str) -> np.ndarray:
+    """One value for every joint, or seven; finite."""
+    v = [float(x) for x in values]
+    if len(v) not in (1, 7):
+        raise InputError(f"{what} takes one value or seven (one per joint), got {len(v)}")
+    if not all(math.isfinite(x) for x in v):
+        raise InputError(f"{what} must be finite numbers, got {v}")
+    return np.array(v * 7 if len(v) == 1 else v)
+
+
+def _check_gains(kp: Sequence[float], kd: Sequence[float], where: str) -> None:
+    p, d = per_joint(kp, f"{where}.kp"), per_joint(kd, f"{where}.kd")
+    if np.any(p <= 0) or np.any(d < 0):
+        raise InputError(f"{where}: gains must be kp > 0 and kd >= 0 (got kp={kp}, kd={kd})")
+
+
+@dataclass
+class ComputedTorque:
+    """Drake's ``InverseDynamicsController``; ``kp`` (1/s^2), ``kd`` (1/s): one or seven."""
+
+    kp: list[float] = field(default_factory=lambda: [100.0])
+    kd: list[float] = field(default_factory=lambda: [20.0])
+    name: ClassVar[str] = "torque"
+
+    def check(self) -> None:
+        _check_gains(self.kp, self.kd, "controller (ComputedTorque)")
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
+
+    def arm_pd_gains(self) -> None:
+        return None
+
+    def add_to(self, builder, scene, desired_state, desired_acceleration) -> OutputPort:
+        kp, kd = self.gains()
+        controller = builder.AddNamedSystem(
+            "inverse_dynamics_controller",
+            InverseDynamicsController(scene.control_plant, kp, np.zeros(7), kd, True),
+        )
+        builder.Connect(
+            scene.plant.get_state_output_port(scene.arm),
+            controller.get_input_port_estimated_state(),
+        )
+        builder.Connect(desired_state, controller.get_input_port_desired_state())
+        builder.Connect(desired_acceleration, controller.get_input_port_desired_acceleration())
+        builder.Connect(
+            controller.get_output_port_control(), scene.plant.get_actuation_input_port(scene.arm)
+        )
+        return controller.get_output_port_control()
+
+
+@dataclass
+class JointPd:
+    """The plant's built-in joint PD plus inverse-dynamics feed-forward of the reference."""
+
+    kp: list[float] = field(default_factory=lambda: list(POSITION_KP))
+    kd: list[float] = field(default_factory=lambda: list(POSITION_KD))
+    name: ClassVar[str] = "position"
+
+    def check(self) -> None:
+        _check_gains(self.kp, self.kd, "controller (JointPd)")
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
+
+    def arm_pd_gains(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.gains()
+
+    def add_to(self, builder, scene, desired_state, desired_acceleration) -> OutputPort:
+        # Feed-forward: the torque the reference needs, M(q_d) a_d + C(q_d, v_d) v_d + g(q_d),
+        # from Drake's InverseDynamics evaluated on the *desired* state; the PD corrects.
+        feedforward = builder.AddNamedSystem(
+            "feedforward",
+            InverseDynamics(
+                scene.control_plant, InverseDynamics.InverseDynamicsMode.kInverseDynamics
+            ),
+        )
+        builder.Connect(desired_state, feedforward.get_input_port_estimated_state())
+        builder.Connect(desired_acceleration, feedforward.get_input_port_desired_acceleration())
+        builder.Connect(desired_state, scene.plant.get_desired_state_input_port(scene.arm))
+        builder.Connect(
+            feedforward.get_output_port_generalized_force(),
+            scene.plant.get_actuation_input_port(scene.arm),
+        )
+        return feedforward.get_output_port_generalized_force()
+
+
+@dataclass
+class CustomController:
+    """A controller of the user's: ``factory`` (``module:attribute``) called as
+    ``factory(**options)`` must return an object with the :class:`Controller` protocol."""
+
+    factory: str = ""
+    options: dict[str, float] = field(default_factory=dict)
+
+    def check(self) -> None:
+        make_controller(self)
+
+
+#: The controller configs a scenario's ``controller:`` section can hold (by YAML tag).
+ControllerConfig = ComputedTorque | JointPd | CustomController
+#: ``--mode`` names of the shipped controllers.
+MODES = {"torque": ComputedTorque, "position": JointPd}
+
+
+def make_controller(config: ControllerConfig) -> Controller:
+    """The controller a config describes: the one place that tells the kinds apart."""
+    if not isinstance(config, CustomController):
+        return config
+    factory = load_attribute(config.factory, "controller factory")
+    if not callable(factory):
+        raise InputError(f"controller factory {config.factory!r} is not callable")
+    try:
+        controller = factory(**config.options)
+    except TypeError as e:
+        raise InputError(
+            f"controller factory {config.factory!r} does not take options "
+            f"{sorted(config.options)}: {e}"
+        ) from None
+    require(controller, config.factory, "controller", ("name", "arm_pd_gains", "add_to"))
+    return controller

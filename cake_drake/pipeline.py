@@ -1,0 +1,327 @@
+"""The whole cake as a library call: ``run(scenario) -> RunResult``.
+
+:func:`check` is the one validation pass: it reads every input a scenario names (PDDL,
+plan file, recorded reference), resolves every plug-in and checks every number, and
+refuses bad input with one :class:`~cake_drake.errors.InputError` line before anything is
+planned, built or simulated. :func:`run` then plans (or reads the plan), builds the
+Diagram, simulates, reads the verdict from the measured poses and writes the outputs,
+including the resolved ``scenario.yaml`` that reproduces the run.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+
+from cake_drake.diagram import CakeDiagram, build_diagram
+from cake_drake.errors import InputError, NoPlanError
+from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
+from cake_drake.plugins import resolve
+from cake_drake.scenario import Recorded, Scenario, resolve_path
+from cake_drake.symbolic import (
+    PLANNERS,
+    PROBLEM_5_OPTIMAL_LENGTH,
+    GroundAction,
+    Plan,
+    Problem,
+    check_state,
+    fact_str,
+    is_blocksworld,
+    load_problem,
+    read_plan,
+    solve_problem,
+    towers,
+    validate_plan,
+)
+from cake_drake.world.scene import layout
+
+#: A planner: ``(problem, time_limit) -> Plan`` (or a sequence of ground actions).
+Planner = Callable[[Problem, float | None], "Plan | Sequence[GroundAction]"]
+#: The shipped planners, through the same door as a user's ``module:attribute``.
+PLANNER_REGISTRY: dict[str, Planner] = {
+    name: partial(lambda problem, time_limit, _n: solve_problem(problem, _n, time_limit), _n=name)
+    for name in PLANNERS
+}
+
+
+@dataclass
+class Checked:
+    """What :func:`check` read and resolved, ready to run."""
+
+    scenario: Scenario
+    problem: Problem
+    planner: Planner | None  # None when a plan file is executed
+    out: Path | None
+
+
+@dataclass
+class RunResult:
+    """What a run produced, for the CLI, the benchmarks, the sweeps and the notebooks."""
+
+    success: bool
+    message: str
+    plan: Plan
+    execution: Execution
+    cake: CakeDiagram
+    problem: Problem
+    stages: dict[str, float] = field(default_factory=dict)
+    written: list[Path] = field(default_factory=list)
+    unmet: list[str] = field(default_factory=list)
+
+
+def _range(value: float, lo: float, hi: float, what: str, unit: str = "") -> None:
+    if not (isinstance(value, int | float) and math.isfinite(value) and lo <= value <= hi):
+        raise InputError(f"{what} = {value!r} is outside {lo:g} to {hi:g}{unit}")
+
+
+def _check_numbers(s: Scenario) -> None:
+    w, m, sim = s.world, s.motion, s.simulation
+    _range(w.time_step, 0.0005, 0.02, "world.time_step", " s")
+    _range(w.slot_radius, 0.2, 2.0, "world.slot_radius", " m")
+    _range(w.sap_near_rigid_threshold, 0.0, 1.0, "world.sap_near_rigid_threshold")
+    _range(w.finger_kp, 1e-3, 1e6, "world.finger_kp", " N/m")
+    _range(w.finger_kd, 0.0, 1e5, "world.finger_kd", " N s/m")
+    approximations = ("sap", "lagged", "similar", "tamsi")
+    if w.contact_approximation not in approximations:
+        raise InputError(
+            f"world.contact_approximation {w.contact_approximation!r}; choose one of: "
+            + ", ".join(approximations)
+        )
+    t = m.timing
+    _range(t.velocity_fraction, 0.01, 1.0, "motion.timing.velocity_fraction")
+    _range(t.acceleration_fraction, 0.01, 1.0, "motion.timing.acceleration_fraction")
+    _range(t.gentle, 0.01, 1.0, "motion.timing.gentle")
+    _range(t.min_move, 0.0, 10.0, "motion.timing.min_move", " s")
+    _range(t.gripper_time, 0.01, 10.0, "motion.timing.gripper_time", " s")
+    _range(t.settle_time, 0.0, 10.0, "motion.timing.settle_time", " s")
+    wp = m.waypoints
+    _range(wp.approach, 0.0, 0.5, "motion.waypoints.approach", " m")
+    _range(wp.transit_clearance, 0.0, 0.5, "motion.waypoints.transit_clearance", " m")
+    _range(wp.place_drop, 0.0, 0.05, "motion.waypoints.place_drop", " m")
+    _range(wp.slot_clearance, 0.0, 0.5, "motion.waypoints.slot_clearance", " m")
+    if m.avoid_collisions and not m.collision_check:
+        raise InputError(
+            "motion.avoid_collisions needs motion.collision_check (--avoid-collisions "
+            "cannot go with --no-collision-check)"
+        )
+    _range(sim.settle_s, 0.0, 60.0, "simulation.settle_s", " s")
+    _range(sim.max_sim_s, 1.0, 3600.0, "simulation.max_sim_s", " s")
+    if s.task.time_limit is not None:
+        _range(s.task.time_limit, 1e-3, 86400.0, "task.time_limit", " s")
+
+
+def load_world_problem(domain: Path, problem_path: Path) -> Problem:
+    """A Blocksworld problem whose initial state the world can lay out."""
+    problem = load_problem(domain, problem_path)
+    if not is_blocksworld(problem.domain):
+        raise InputError(
+            f"{domain}: the simulated world runs Blocksworld (predicates on, on-table, clear, "
+            "holding, arm-empty; actions pick-up, put-down, stack, unstack)"
+        )
+    issues = check_state(problem.init, problem.objects)
+    if issues:
+        raise InputError(f"{problem_path}: the initial state cannot be laid out: {issues[0]}")
+    return problem
+
+
+def check_output_folder(out: Path) -> None:
+    """Refuse an output folder that cannot be one, before any work."""
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder; choose another output folder")
+    parent = out if out.exists() else next((p for p in out.parents if p.exists()), Path("."))
+    import os
+
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"{out}: cannot write there ({parent} is not writable)")
+
+
+def check(scenario: Scenario, write: bool = True) -> Checked:
+    """The one validation pass: every input read, every plug-in resolved, every number
+    checked, before anything is planned or simulated."""
+    from cake_drake.dynamic.controllers import make_controller
+    from cake_drake.dynamic.reference import ReferenceTrajectory
+    from cake_drake.geometric.ik import SOLVERS
+    from cake_drake.systems import ACTION_SOURCES
+
+    s = scenario
+    _check_numbers(s)
+    getattr(s.controller, "check", lambda: None)()
+    make_controller(s.controller)
+    task = s.task
+    problem = load_world_problem(resolve_path(task.domain), resolve_path(task.problem))
+    layout(towers(problem.init), s.world.slots)
+    planner = None
+    if task.plan:
+        if task.planner != "astar-lmcut":
+            raise InputError(
+                f"task.plan and task.planner ({task.planner}) both given: a plan file is "
+                "executed as it is, not planned; drop one"
+            )
+        plan_path = resolve_path(task.plan)
+        if not plan_path.is_file():
+            raise InputError(f"{plan_path}: no such plan file")
+    else:
+        planner = resolve(task.planner, PLANNER_REGISTRY, "planner")
+    if isinstance(s.reference, Recorded):
+        if not s.reference.path:
+            raise InputError("reference: !Recorded needs a path (a trajectory.npz from a run)")
+        replay = ReferenceTrajectory.from_npz(
+            resolve_path(s.reference.path), s.reference.differentiate
+        )
+        if replay.end_time > s.simulation.max_sim_s:
+            raise InputError(
+                f"{s.reference.path}: the recording lasts {replay.end_time:g} s, more than "
+                f"simulation.max_sim_s = {s.simulation.max_sim_s:g} s"
+            )
+    else:
+        resolve(s.reference.action_source, ACTION_SOURCES, "action source")
+        resolve(s.motion.ik, SOLVERS, "IK solver")
+    out = Path(s.outputs.folder) if write else None
+    if out is not None:
+        check_output_folder(out)
+    return Checked(s, problem, planner, out)
+
+
+def get_plan(checked: Checked) -> Plan:
+    """Plan with the scenario's planner, or read and validate its plan file."""
+    task, problem = checked.scenario.task, checked.problem
+    if checked.planner is None:
+        plan_path = resolve_path(task.plan)
+        actions = read_plan(plan_path)
+        label = f"file {plan_path}"
+    else:
+        result = checked.planner(problem, task.time_limit)
+        if isinstance(result, Plan):
+            return result
+        if result is None:
+            raise NoPlanError(f"planner {task.planner} returned no plan")
+        actions = tuple(result)
+        label = task.planner
+    verdict_ = validate_plan(problem, actions)
+    if not verdict_.ok:
+        raise NoPlanError(
+            f"{label}: not a valid plan for {problem.problem_path}: {verdict_.message}"
+        )
+    return Plan(tuple(actions), label, "-", "-", 0.0, False)
+
+
+def verdict(problem: Problem, execution: Execution) -> tuple[bool, list[str], str]:
+    """(success, unmet goal facts, one-line message), from the measured poses."""
+    if execution.error is not None:
+        return False, [], execution.error
+    facts = execution.reading.facts
+    unmet = [fact_str(f) for f in sorted(problem.goal - facts)]
+    loose = [
+        f"{b} stands {off * 1000:.1f} mm off the cube below (tolerance {STACK_TOL * 1000:.0f} mm)"
+        for b, off in sorted(execution.offsets.items())
+        if off > STACK_TOL and any(g[0] == "on" and g[1] == b for g in problem.goal)
+    ]
+    if unmet or loose:
+        parts = []
+        if unmet:
+            parts.append("goal facts not true in the simulated world: " + " ".join(unmet))
+        if loose:
+            parts.append("; ".join(loose))
+        if execution.reading.problems:
+            parts.append("; ".join(execution.reading.problems))
+        return False, unmet, "; ".join(parts)
+    return True, [], "goal reached in the simulated world"
+
+
+def tower_text(execution: Execution) -> str:
+    """The towers standing at the end, top first, and the largest stacking offset."""
+    lines = [" on ".join(reversed(t)) for t in towers(execution.reading.facts) if len(t) > 1]
+    worst = max(execution.offsets.values(), default=0.0) * 1000
+    return f"{'; '.join(lines) or 'no tower'} (largest xy offset {worst:.1f} mm)"
+
+
+def run(
+    scenario: Scenario,
+    write: bool = True,
+    quiet: bool = True,
+    meshcat=None,
+    started: float | None = None,
+) -> RunResult:
+    """The whole pipeline: check -> plan -> Diagram -> simulation -> verdict -> outputs.
+
+    ``write=False`` writes nothing (for notebooks and studies). ``meshcat`` is a
+    ``pydrake.geometry.Meshcat`` to watch; with ``scenario.visualization.meshcat`` and
+    none given, one is started. ``started`` is when the process began (for the stage
+    times in ``summary.json``).
+    """
+    t = time.perf_counter()
+    stages: dict[str, float] = {}
+    if started is not None:
+        stages["import"] = t - started
+    checked = check(scenario, write)
+    problem = checked.problem
+    blocks = sorted(problem.objects)
+    initial = layout(towers(problem.init), scenario.world.slots)
+    if scenario.visualization.meshcat and meshcat is None:
+        from pydrake.geometry import StartMeshcat
+
+        meshcat = StartMeshcat()
+    worker = None
+    if checked.out is not None:
+        from cake_drake.outputs.worker import OutputWorker
+
+        worker = OutputWorker(blocks, initial, render=scenario.outputs.render)
+    try:
+        plan = get_plan(checked)
+        stages["planning"] = time.perf_counter() - t
+        if not quiet and checked.planner is not None:
+            print(plan.note(), file=sys.stderr)
+            if (
+                problem.problem_path.endswith("problem_5.pddl")
+                and plan.length != PROBLEM_5_OPTIMAL_LENGTH
+            ):
+                print(
+                    f"note: problem_5's optimal plan has {PROBLEM_5_OPTIMAL_LENGTH} actions; "
+                    f"{scenario.task.planner} is satisficing",
+                    file=sys.stderr,
+                )
+
+        t = time.perf_counter()
+        cake = build_diagram(scenario, blocks, initial, plan.actions, meshcat=meshcat)
+        stages["diagram_build"] = time.perf_counter() - t
+
+        names = cake.reference.actions
+        progress = ProgressBar(
+            len(names), lambda k: f"({names[k]})" if k < len(names) else "", enabled=not quiet
+        )
+        if meshcat is not None:
+            meshcat.StartRecording()
+        sim = scenario.simulation
+        execution = execute(cake, sim.max_sim_s, sim.settle_s, progress=progress)
+        for warning in execution.warnings:
+            print(f"warning: collision: {warning}", file=sys.stderr)
+        stages["simulation"] = execution.wall_s
+        if cake.ik is not None:
+            stages["ik"] = sum(cake.ik.times_ms) / 1000
+        success, unmet, message = verdict(problem, execution)
+        result = RunResult(success, message, plan, execution, cake, problem, stages, [], unmet)
+        if checked.out is None:
+            return result
+
+        from cake_drake.outputs.files import OutputDir
+        from cake_drake.outputs.report import write_outputs
+
+        staged = OutputDir(checked.out)
+        try:
+            write_outputs(staged, result, worker, scenario.outputs.render, meshcat)
+            result.written = staged.commit()
+        except BaseException:
+            staged.discard()
+            raise
+        return result
+    finally:
+        if worker is not None:
+            worker.close()
+
+
+__all__ = ["Checked", "RunResult", "check", "get_plan", "run", "verdict"]

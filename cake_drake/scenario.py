@@ -1,0 +1,409 @@
+"""A run is data: one typed :class:`Scenario` tree, loaded from YAML and saved with every run.
+
+Everything that shapes a run lives here - the task (domain, problem or plan file,
+planner), the world (plant and contact settings, table slots), the motion (IK solver,
+timing, waypoints, collision policy), the controller and its gains, the reference
+(planned by the action source, or a recorded trajectory), the seed, the outputs and the
+visualization. Files are read and written with Drake's typed YAML
+(``pydrake.common.yaml``); a file may hold one scenario, or several by name::
+
+    exercise_torque:
+      controller: !ComputedTorque {kp: [100], kd: [20]}
+    kd_5:
+      controller: !ComputedTorque {kp: [100], kd: [5]}
+
+``python -m cake_drake.run --scenario FILE [--name NAME]`` runs one, with flags as
+overrides; every run writes the resolved ``scenario.yaml`` to its output folder, and
+running that file again reproduces the run. Bad files are refused before anything is
+built, with the file, the line and the valid keys or tags.
+
+Paths in a scenario are ``package://cake_drake/...`` (the repository's ``models/``), an
+absolute path, or a path relative to the scenario file's folder.
+"""
+
+import dataclasses
+import math
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+
+from cake_drake import MODELS_DIR, __version__
+from cake_drake.dynamic.controllers import (
+    ComputedTorque,
+    ControllerConfig,
+    CustomController,
+    JointPd,
+)
+from cake_drake.errors import InputError
+from cake_drake.geometric.trajectory import Timing
+from cake_drake.geometric.waypoints import WaypointParams
+from cake_drake.world.scene import WorldConfig
+
+PACKAGE = "package://cake_drake/"
+DEFAULT_PLANNER = "astar-lmcut"
+
+
+@dataclass
+class Task:
+    """What to do: a PDDL problem, solved by ``planner`` or by the plan in ``plan``."""
+
+    domain: str = PACKAGE + "pddl/blocksworld.pddl"
+    problem: str = PACKAGE + "pddl/problem_5.pddl"
+    #: Execute this plan file (plan.txt, .soln, sas_plan) instead of planning; validated first.
+    plan: str = ""
+    #: A planner of the registry (``python -m cake_drake.plan --help``) or module:attribute.
+    planner: str = DEFAULT_PLANNER
+    time_limit: float | None = None  # s, for the planner
+
+
+@dataclass
+class Motion:
+    """The geometric layer: IK, timing, waypoints and what to do about collisions."""
+
+    #: ``drake`` | ``dls`` or module:attribute (a factory ``(kinematics, seed) -> IkSolver``).
+    ik: str = "drake"
+    timing: Timing = field(default_factory=Timing)
+    waypoints: WaypointParams = field(default_factory=WaypointParams)
+    collision_check: bool = True  # report planned moves that sweep through cubes
+    avoid_collisions: bool = False  # re-plan such moves higher or with the hand turned
+
+
+@dataclass
+class Planned:
+    """The reference comes from an action source, through the waypoint/IK layer."""
+
+    #: ``plan`` (the planner's plan, one action after another) or module:attribute of a
+    #: factory ``(actions) -> LeafSystem`` with an ``actions_done`` input and an ``action``
+    #: output (and, if it wants, a ``body_poses`` input).
+    action_source: str = "plan"
+
+
+@dataclass
+class Recorded:
+    """Replay a recorded ``trajectory.npz`` (exercise 4.x.3) instead of planning motion."""
+
+    path: str = ""
+    differentiate: str = "spline"  # how q-dot and q-double-dot are recovered: spline | central
+
+
+ReferenceConfig = Planned | Recorded
+
+
+@dataclass
+class Simulation:
+    """How long the world runs."""
+
+    settle_s: float = 0.3  # after the last action, before the poses are read
+    max_sim_s: float = 300.0  # simulated-time budget
+
+
+@dataclass
+class Outputs:
+    folder: str = "outputs"
+    render: bool = True  # final_state.png
+
+
+@dataclass
+class Visualization:
+    meshcat: bool = False  # show the run live in Meshcat and write replay.html
+
+
+@dataclass
+class Scenario:
+    """Everything that shapes one run."""
+
+    task: Task = field(default_factory=Task)
+    world: WorldConfig = field(default_factory=WorldConfig)
+    motion: Motion = field(default_factory=Motion)
+    controller: ControllerConfig = field(default_factory=ComputedTorque)
+    reference: ReferenceConfig = field(default_factory=Planned)
+    simulation: Simulation = field(default_factory=Simulation)
+    outputs: Outputs = field(default_factory=Outputs)
+    visualization: Visualization = field(default_factory=Visualization)
+    seed: int = 0  # IK restarts draw from it; the same seed gives the same run
+
+
+# --- paths -------------------------------------------------------------------------------
+
+
+def resolve_path(path: str, base: Path | None = None) -> Path:
+    """A scenario path as a file system path (``package://cake_drake/`` is ``models/``)."""
+    if path.startswith(PACKAGE):
+        return MODELS_DIR / path[len(PACKAGE) :]
+    if path.startswith("package://"):
+        raise InputError(f"{path}: only package://cake_drake/... is known (the models/ folder)")
+    p = Path(path).expanduser()
+    return p if p.is_absolute() or base is None else base / p
+
+
+def portable_path(path: str | Path) -> str:
+    """``package://cake_drake/...`` for a shipped file, else the absolute path."""
+    p = Path(path).resolve()
+    try:
+        return PACKAGE + p.relative_to(MODELS_DIR.resolve()).as_posix()
+    except ValueError:
+        return str(p)
+
+
+def _scenario_paths(scenario: Scenario):
+    """(getter, setter) pairs for every path field, for resolving and saving."""
+    yield scenario.task, "domain"
+    yield scenario.task, "problem"
+    if scenario.task.plan:
+        yield scenario.task, "plan"
+    if isinstance(scenario.reference, Recorded) and scenario.reference.path:
+        yield scenario.reference, "path"
+
+
+def resolved(scenario: Scenario, base: Path | None) -> Scenario:
+    """A copy with every path absolute (or a package URL), relative ones taken from ``base``."""
+    out = _copy(scenario)
+    for section, name in _scenario_paths(out):
+        setattr(section, name, portable_path(resolve_path(getattr(section, name), base)))
+    return out
+
+
+def _copy(scenario: Scenario) -> Scenario:
+    return yaml_load_typed(schema=Scenario, data=yaml_dump_typed(scenario))
+
+
+# --- loading -----------------------------------------------------------------------------
+
+
+def _fields(schema) -> dict[str, object]:
+    hints = typing.get_type_hints(schema)
+    return {f.name: hints[f.name] for f in dataclasses.fields(schema)}
+
+
+def _union_members(tp) -> tuple:
+    if typing.get_origin(tp) in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        return typing.get_args(tp)
+    return ()
+
+
+def _where(source: str, node: yaml.Node) -> str:
+    return f"{source}:{node.start_mark.line + 1}"
+
+
+def _check_node(node: yaml.Node, tp, source: str, path: str) -> None:
+    """Walk the YAML node against the schema type, so errors name the line."""
+    members = _union_members(tp)
+    if members:
+        if isinstance(node, yaml.ScalarNode) and node.value in ("null", "~", ""):
+            if type(None) in members:
+                return
+        classes = [m for m in members if dataclasses.is_dataclass(m)]
+        if classes:
+            tag = node.tag if node.tag.startswith("!") and not node.tag.startswith("!!") else None
+            if tag is None:
+                chosen = classes[0]
+            else:
+                by_tag = {f"!{c.__name__}": c for c in classes}
+                if tag not in by_tag:
+                    raise InputError(
+                        f"{_where(source, node)}: {path} has unknown tag {tag}; "
+                        f"valid tags: {', '.join(by_tag)}"
+                    )
+                chosen = by_tag[tag]
+            _check_node(node, chosen, source, path)
+            return
+        others = [m for m in members if m is not type(None)]
+        _check_node(node, others[0], source, path)
+        return
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(node, yaml.MappingNode):
+            raise InputError(
+                f"{_where(source, node)}: {path or 'the scenario'} must be a mapping of "
+                f"{', '.join(_fields(tp))}"
+            )
+        fields = _fields(tp)
+        seen = set()
+        for key_node, value_node in node.value:
+            key = key_node.value
+            if key == "<<":
+                continue
+            if key not in fields:
+                raise InputError(
+                    f"{_where(source, key_node)}: unknown key {key!r} in "
+                    f"{path or 'the scenario'}; valid keys: {', '.join(fields)}"
+                )
+            if key in seen:
+                raise InputError(f"{_where(source, key_node)}: key {key!r} given twice")
+            seen.add(key)
+            _check_node(value_node, fields[key], source, f"{path}.{key}" if path else key)
+        return
+    origin = typing.get_origin(tp)
+    if origin is list:
+        if not isinstance(node, yaml.SequenceNode):
+            raise InputError(f"{_where(source, node)}: {path} must be a list, e.g. [1.0]")
+        (item,) = typing.get_args(tp)
+        for i, child in enumerate(node.value):
+            _check_node(child, item, source, f"{path}[{i}]")
+        return
+    if origin is dict:
+        if not isinstance(node, yaml.MappingNode):
+            raise InputError(f"{_where(source, node)}: {path} must be a mapping")
+        _, value_type = typing.get_args(tp)
+        for key_node, value_node in node.value:
+            _check_node(value_node, value_type, source, f"{path}.{key_node.value}")
+        return
+    if not isinstance(node, yaml.ScalarNode):
+        raise InputError(f"{_where(source, node)}: {path} must be a single {tp.__name__}")
+    value = node.value
+    ok = True
+    if tp is bool:
+        ok = value.lower() in ("true", "false", "yes", "no", "on", "off")
+    elif tp is int:
+        ok = _parses(int, value)
+    elif tp is float:
+        ok = _parses(float, value) and math.isfinite(float(value))
+    if not ok:
+        raise InputError(
+            f"{_where(source, node)}: {path} = {value!r} is not a "
+            f"{'finite number' if tp is float else tp.__name__}"
+        )
+
+
+def _parses(kind, value: str) -> bool:
+    try:
+        kind(value)
+    except ValueError:
+        return False
+    return True
+
+
+def _top_level(text: str, source: str) -> yaml.Node | None:
+    try:
+        return yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        line = f":{mark.line + 1}" if mark else ""
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise InputError(f"{source}{line}: not valid YAML ({problem})") from None
+
+
+def parse_scenario(text: str, source: str = "<string>", name: str | None = None) -> Scenario:
+    """A :class:`Scenario` from YAML text: one scenario, or ``name`` of several."""
+    root = _top_level(text, source)
+    if root is None:
+        if name:
+            raise InputError(f"{source}: empty file, no scenario {name!r}")
+        return Scenario()
+    if not isinstance(root, yaml.MappingNode):
+        raise InputError(f"{_where(source, root)}: a scenario file is a mapping")
+    keys = [k.value for k, _ in root.value]
+    fields = _fields(Scenario)
+    # Several named scenarios: no key is a Scenario field and every value is a mapping.
+    named = name is not None or (
+        not set(keys) & set(fields) and all(isinstance(v, yaml.MappingNode) for _, v in root.value)
+    )
+    if named:
+        if name is None:
+            raise InputError(
+                f"{source} holds the scenarios {', '.join(keys)}: choose one with --name"
+            )
+        entries = dict((k.value, v) for k, v in root.value)
+        if name not in entries:
+            raise InputError(
+                f"{source}: no scenario named {name!r}; it holds {', '.join(keys) or 'none'}"
+            )
+        node = entries[name]
+        _check_node(node, Scenario, source, "")
+        try:
+            return yaml_load_typed(schema=Scenario, data=text, child_name=name)
+        except Exception as e:  # noqa: BLE001 - the typed loader's message, as one line
+            raise InputError(f"{source}: scenario {name!r}: {_first_line(e)}") from None
+    _check_node(root, Scenario, source, "")
+    try:
+        return yaml_load_typed(schema=Scenario, data=text)
+    except Exception as e:  # noqa: BLE001
+        raise InputError(f"{source}: {_first_line(e)}") from None
+
+
+def _first_line(e: Exception) -> str:
+    return (str(e).strip().splitlines() or [type(e).__name__])[0]
+
+
+def load_scenario(path: str | Path, name: str | None = None) -> Scenario:
+    """Read a scenario file; relative paths inside it are taken from the file's folder."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such scenario file") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: a folder, not a scenario file (*.yaml)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(f"{path}: cannot read the scenario ({e})") from None
+    scenario = parse_scenario(text, str(path), name)
+    return resolved(scenario, path.resolve().parent)
+
+
+def scenario_names(path: str | Path) -> list[str]:
+    """The names of the scenarios a file holds (empty for a single-scenario file)."""
+    root = _top_level(Path(path).read_text(encoding="utf-8"), str(path))
+    if not isinstance(root, yaml.MappingNode):
+        return []
+    keys = [k.value for k, _ in root.value]
+    if set(keys) & set(_fields(Scenario)):
+        return []
+    return keys if all(isinstance(v, yaml.MappingNode) for _, v in root.value) else []
+
+
+# --- saving ------------------------------------------------------------------------------
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of the packages a run's result depends on."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"cake_drake": __version__}
+    for name in ("drake", "numpy", "pyperplan", "matplotlib"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def dump_scenario(scenario: Scenario) -> str:
+    """YAML text of ``scenario`` (every field, defaults included) with a versions header."""
+    versions = ", ".join(f"{k} {v}" for k, v in package_versions().items())
+    header = (
+        "# The resolved scenario of a cake_drake run. Re-run it with\n"
+        "#   python -m cake_drake.run --scenario scenario.yaml --out OTHER_FOLDER\n"
+        f"# Recorded with: {versions}\n"
+    )
+    return header + yaml_dump_typed(scenario)
+
+
+def controller_for_mode(mode: str) -> ControllerConfig:
+    """The shipped controller a ``--mode`` names."""
+    from cake_drake.dynamic.controllers import MODES
+
+    try:
+        return MODES[mode]()
+    except KeyError:
+        raise InputError(f"unknown mode {mode!r}; choose one of: {', '.join(MODES)}") from None
+
+
+__all__ = [
+    "ComputedTorque",
+    "CustomController",
+    "JointPd",
+    "Motion",
+    "Outputs",
+    "Planned",
+    "Recorded",
+    "Scenario",
+    "Simulation",
+    "Task",
+    "Visualization",
+    "dump_scenario",
+    "load_scenario",
+    "parse_scenario",
+    "resolve_path",
+]
