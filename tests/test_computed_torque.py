@@ -13,6 +13,7 @@ from cake_drake.dynamic.analysis import settling, stationary_samples
 from cake_drake.gains import study
 from cake_drake.geometric.trajectory import PHASE_NAMES
 from cake_drake.outputs.report import gravity_torques
+from cake_drake.scenario import Recorded, Scenario
 
 pytestmark = pytest.mark.slow
 J4 = 3  # joint 4, zero-based
@@ -21,7 +22,8 @@ J4 = 3  # joint 4, zero-based
 @pytest.fixture(scope="module")
 def replays(position_run):
     out, _ = position_run
-    table, results = study([20.0, 5.0], kp=100.0, reference=out / "trajectory.npz")
+    base = Scenario(reference=Recorded(str(out / "trajectory.npz")))
+    table, results = study(base, [20.0, 5.0])
     return table, results
 
 
@@ -37,7 +39,7 @@ def test_static_torque_is_the_gravity_term(replays):
     logs = r.execution.logs
     still = stationary_samples(logs.v, logs.v_d)
     assert still.sum() > 20
-    g = gravity_torques(r.cake.control_plant, logs.q[still])[:, J4]
+    g = gravity_torques(r.cake.scene.control_plant, logs.q[still])[:, J4]
     tau = logs.tau_commanded[still, J4]
     assert np.all(np.abs(g) > 1.0), "joint 4 carries a gravity load whenever the arm is still"
     rel = np.abs(tau - g) / np.abs(g)
@@ -49,7 +51,7 @@ def test_dynamic_torque_peaks_fall_in_lift_and_transport(replays):
     _, results = replays
     r = results[20.0]
     logs = r.execution.logs
-    g = gravity_torques(r.cake.control_plant, logs.q)[:, J4]
+    g = gravity_torques(r.cake.scene.control_plant, logs.q)[:, J4]
     dynamic = np.abs(logs.tau_commanded[:, J4] - g)
     top = np.argsort(dynamic)[-10:]
     phases = {PHASE_NAMES[logs.phase[i]] for i in top}

@@ -144,7 +144,7 @@ def test_unreachable_cube_raises_ik_error_naming_action_and_phase(kin, name):
     world = WorldView({"a": far}, kin.pose(Q_HOME))
     action = GroundAction("pick-up", ("a",))
     with pytest.raises(IkError) as err:
-        solve_action(action, 2, world, make_solver(name, kin), JointTrajectory(Q_HOME))
+        solve_action(action, 2, world, make_solver(name, kin), JointTrajectory(Q_HOME, kin.limits))
     message = str(err.value)
     assert "action 3 (pick-up a)" in message
     assert "pre-grasp" in message and "1.5" in message and name in message

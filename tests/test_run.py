@@ -8,10 +8,10 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import scenario
 
-from cake_drake.diagram import RunConfig
 from cake_drake.geometric.trajectory import load_npz
-from cake_drake.run import run
+from cake_drake.pipeline import run
 from cake_drake.symbolic import random_problem
 
 pytestmark = pytest.mark.slow
@@ -79,7 +79,7 @@ def test_replay_of_a_saved_trajectory_in_torque_mode(position_run, tmp_path):
 def test_a_generated_three_block_problem(mode, tmp_path):
     problem = tmp_path / "p3.pddl"
     problem.write_text(random_problem(3, seed=4))
-    result = run(RunConfig(mode=mode), problem_path=problem, out=None)
+    result = run(scenario(mode, problem), write=False)
     assert result.success, result.message
     from cake_drake.symbolic import BLOCKSWORLD_DOMAIN, load_problem
 
@@ -88,8 +88,8 @@ def test_a_generated_three_block_problem(mode, tmp_path):
 
 
 def test_same_inputs_same_plan_and_trajectory():
-    a = run(RunConfig(mode="torque"), out=None)
-    b = run(RunConfig(mode="torque"), out=None)
+    a = run(scenario("torque"), write=False)
+    b = run(scenario("torque"), write=False)
     assert a.plan.actions == b.plan.actions
     np.testing.assert_array_equal(a.execution.logs.q_d, b.execution.logs.q_d)
     np.testing.assert_array_equal(a.execution.logs.q, b.execution.logs.q)
@@ -111,7 +111,11 @@ def test_unreachable_cube_is_exit_3_naming_the_action(tmp_path):
         (["--planner", "nope"], 2, "nope"),
         (["--kp", "1", "2", "3"], 2, "one value or seven"),
         (["--ik", "trac"], 2, "drake"),
-        (["--mode", "position", "--reference", "x.npz"], 2, "--mode torque"),
+        (["--avoid-collisions", "--no-collision-check"], 2, "collision_check"),
+        (["--kd", "nan"], 2, "finite"),
+        (["--kp", "inf"], 2, "finite"),
+        (["--differentiate", "central"], 2, "--reference"),
+        (["--name", "x"], 2, "--scenario"),
     ],
 )
 def test_bad_input_is_one_line_and_writes_nothing(tmp_path, args, code, words):

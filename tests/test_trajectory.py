@@ -10,8 +10,6 @@ from cake_drake.geometric.ik import Kinematics
 from cake_drake.geometric.trajectory import (
     GRIPPER_CLOSED,
     GRIPPER_OPEN,
-    PANDA_ACCELERATION,
-    PANDA_VELOCITY,
     PHASE_NAMES,
     JointTrajectory,
     Timing,
@@ -22,6 +20,15 @@ from cake_drake.world.scene import Q_HOME
 
 DT = 1e-3
 TIMING = Timing()
+#: Franka's datasheet, independently of the URDF the plant reads its limits from.
+PANDA_VELOCITY = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])  # rad/s
+PANDA_ACCELERATION = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])  # rad/s^2
+
+
+def test_the_plant_has_the_datasheet_velocity_and_acceleration_limits():
+    limits = Kinematics().limits
+    np.testing.assert_array_equal(limits.velocity, PANDA_VELOCITY)
+    np.testing.assert_array_equal(limits.acceleration, PANDA_ACCELERATION)
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +42,7 @@ def trajectory(limits):
     """Moves between configurations spread over the joint range, holds and gripper ramps."""
     lower, upper = limits
     rng = np.random.default_rng(2)
-    traj = JointTrajectory(Q_HOME.copy())
+    traj = JointTrajectory(Q_HOME.copy(), Kinematics().limits)
     phases = ["pre-grasp", "grasp", "lift", "transport", "place", "retract"]
     for i in range(12):
         # Near the limits too: a straight line between in-limit points stays in limits.

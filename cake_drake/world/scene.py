@@ -174,7 +174,7 @@ def cube_directives(
                 f"        translation: [{', '.join(repr(float(v)) for v in X.translation())}]",
                 f"        rotation: !Rpy {{ deg: [{', '.join(repr(float(v)) for v in rpy)}] }}",
             ]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" if len(lines) > 1 else "directives: []\n"
 
 
 def add_world(
