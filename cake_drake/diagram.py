@@ -33,7 +33,7 @@ from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import TimedSolver
 from cake_drake.scenario import Recorded, Scenario, resolve_path
-from cake_drake.symbolic import GroundAction
+from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.systems import make_action_source
 from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
 from cake_drake.world.scene import Q_HOME, X_HAND_GRASP, Scene, add_world, make_control_plant
@@ -55,13 +55,19 @@ class ReferenceSource:
     def port(self, name: str):
         return self.system.GetOutputPort(name)
 
-    def status(self, root_context) -> tuple[int, str | None, tuple[str, ...]]:
-        """(actions done, the error that stopped execution or None, collision warnings)."""
+    def status(self, root_context) -> tuple[int, bool, str | None, tuple[str, ...]]:
+        """(actions done, finished, the error that stopped execution or None, collision
+        warnings). Planned: finished when the action source has no next action and the
+        arm is idle; recorded: when every recorded action has run."""
         if self.waypoint_ik is not None:
             prog = self.waypoint_ik.progress(self.waypoint_ik.GetMyContextFromRoot(root_context))
-            return prog.done, prog.error, prog.warnings
+            source_context = self.action_source.GetMyContextFromRoot(root_context)
+            command = self.action_source.GetOutputPort("action").Eval(source_context)
+            finished = command.action is None and prog.working < 0
+            return prog.done, finished, prog.error, prog.warnings
         context = self.system.GetMyContextFromRoot(root_context)
-        return int(round(self.port("actions_done").Eval(context)[0])), None, ()
+        done = int(round(self.port("actions_done").Eval(context)[0]))
+        return done, done >= len(self.actions), None, ()
 
 
 @dataclass
@@ -82,6 +88,7 @@ def _add_reference(
     scenario: Scenario,
     scene: Scene,
     actions: Sequence[GroundAction],
+    problem: Problem,
     q_start: np.ndarray,
 ) -> tuple[ReferenceSource, TimedSolver | None]:
     """The one place that tells a planned reference from a recorded one."""
@@ -91,7 +98,10 @@ def _add_reference(
         system = builder.AddNamedSystem("reference", replay.make_source())
         return ReferenceSource(system, replay.executed_actions(), replay=replay), None
     plant = scene.plant
-    source = builder.AddNamedSystem("action_source", make_action_source(ref.action_source, actions))
+    source = builder.AddNamedSystem(
+        "action_source",
+        make_action_source(ref.action_source, actions, problem, list(scene.cubes)),
+    )
     kinematics = Kinematics(scene.control_plant)
     solver = TimedSolver(make_solver(scenario.motion.ik, kinematics, scenario.seed))
     motion = scenario.motion
@@ -125,17 +135,19 @@ def _add_reference(
 
 def build_diagram(
     scenario: Scenario,
-    blocks: Sequence[str],
+    problem: Problem,
     initial_poses: Mapping[str, RigidTransform],
     actions: Sequence[GroundAction] = (),
     q_start: np.ndarray = Q_HOME,
     meshcat=None,
 ) -> CakeDiagram:
-    """Wire the action source, geometry and controller around the simulated Panda.
+    """Wire the action source, geometry and controller around the simulated Panda, for
+    ``problem``'s blocks starting at ``initial_poses`` and the planned ``actions``.
 
     ``meshcat`` (a ``pydrake.geometry.Meshcat``) adds a visualizer; never needed headless.
     """
     controller = make_controller(scenario.controller)
+    blocks = sorted(problem.objects)
     builder = DiagramBuilder()
     scene = add_world(
         builder, blocks, scenario.world, controller.arm_pd_gains(), initial_poses=initial_poses
@@ -145,7 +157,7 @@ def build_diagram(
     plant.SetDefaultPositions(scene.arm, q_start)
     plant.SetDefaultPositions(scene.hand, [0.04, 0.04])
 
-    reference, solver = _add_reference(builder, scenario, scene, actions, q_start)
+    reference, solver = _add_reference(builder, scenario, scene, actions, problem, q_start)
     builder.Connect(reference.port("finger_state"), plant.get_desired_state_input_port(scene.hand))
     tau = controller.add_to(
         builder, scene, reference.port("desired_state"), reference.port("desired_acceleration")

@@ -130,17 +130,16 @@ def execute(
     context = simulator.get_mutable_context()
     simulator.Initialize()
     t0 = time.perf_counter()
-    n_actions = len(cake.reference.actions)
     t = 0.0
     while True:
         t = min(t + chunk_s, max_sim_s)
         simulator.AdvanceTo(t)
-        done, error, warnings = cake.reference.status(context)
+        done, finished, error, warnings = cake.reference.status(context)
         if progress:
             progress.update(t, time.perf_counter() - t0, done)
-        if error is not None or done >= n_actions or t >= max_sim_s:
+        if error is not None or finished or t >= max_sim_s:
             break
-    if error is None and done < n_actions:
+    if error is None and not finished:
         error = f"time budget of {max_sim_s:g} s simulated ran out after {done} actions"
     simulator.AdvanceTo(context.get_time() + settle_s)
     wall = time.perf_counter() - t0
@@ -153,7 +152,7 @@ def execute(
         sim_s=context.get_time(),
         wall_s=wall,
         actions_done=done,
-        n_actions=n_actions,
+        n_actions=len(cake.reference.actions),
         error=error,
         poses=poses,
         reading=reading,

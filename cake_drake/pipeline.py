@@ -287,7 +287,7 @@ def run(
                 )
 
         t = time.perf_counter()
-        cake = build_diagram(scenario, blocks, initial, plan.actions, meshcat=meshcat)
+        cake = build_diagram(scenario, problem, initial, plan.actions, meshcat=meshcat)
         stages["diagram_build"] = time.perf_counter() - t
 
         names = cake.reference.actions

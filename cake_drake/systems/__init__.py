@@ -13,22 +13,27 @@ from pydrake.systems.framework import LeafSystem
 
 from cake_drake.errors import InputError
 from cake_drake.plugins import resolve
-from cake_drake.symbolic import GroundAction
+from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.systems.plan_source import ActionCommand, PlanSource
 
-#: Action sources by name, each a factory ``(actions) -> LeafSystem``.
-ACTION_SOURCES = {"plan": PlanSource}
+#: Action sources by name, each a factory ``(actions, problem, blocks) -> System``.
+ACTION_SOURCES = {"plan": lambda actions, problem, blocks: PlanSource(actions)}
 
 
-def make_action_source(spec: str, actions: Sequence[GroundAction]) -> LeafSystem:
-    """The action source ``spec`` names, for the planned ``actions``.
+def make_action_source(
+    spec: str, actions: Sequence[GroundAction], problem: Problem, blocks: Sequence[str]
+) -> LeafSystem:
+    """The action source ``spec`` names.
 
-    Protocol: a System with a vector input ``actions_done`` (size 1) and an abstract output
-    ``action`` holding an :class:`ActionCommand`; it may also have an abstract input
-    ``body_poses`` (the plant's body poses), which is then connected.
+    A factory is called with the planned ``actions``, the ``problem`` (its goal, for a
+    policy that decides for itself) and the ``blocks`` in the order of the plant's cube
+    bodies. Protocol of what it returns: a System with a vector input ``actions_done``
+    (size 1) and an abstract output ``action`` holding an :class:`ActionCommand` (index =
+    actions done; ``action=None`` once it has nothing more to do). It may also have an
+    abstract input ``body_poses`` (the plant's body poses), which is then connected.
     """
     factory = resolve(spec, ACTION_SOURCES, "action source")
-    system = factory(tuple(actions))
+    system = factory(tuple(actions), problem, tuple(blocks))
     if not hasattr(system, "HasInputPort"):
         raise InputError(
             f"action source {spec!r} returned a {type(system).__name__}, not a Drake System"
