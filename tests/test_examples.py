@@ -1,0 +1,91 @@
+"""Every example plug-in (examples/) runs end to end through the same door a user's would."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cake_drake.errors import NoPlanError
+from cake_drake.pipeline import run
+from cake_drake.scenario import load_scenario, scenario_names
+
+ROOT = Path(__file__).resolve().parent.parent
+EXAMPLES = ROOT / "models" / "scenarios" / "examples.yaml"
+
+
+def test_every_example_file_has_a_scenario():
+    files = {p.stem for p in (ROOT / "examples").glob("*.py")}
+    text = EXAMPLES.read_text()
+    assert files == set(scenario_names(EXAMPLES))
+    assert all(f"examples.{f}:" in text for f in files)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", scenario_names(EXAMPLES))
+def test_example_plugin_builds_the_tower(name, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    result = run(load_scenario(EXAMPLES, name), write=False)
+    assert result.success, result.message
+    assert {("on", "a", "b"), ("on", "d", "e")} <= result.execution.reading.facts
+
+
+@pytest.mark.slow
+def test_the_policy_chooses_its_own_actions(monkeypatch):
+    monkeypatch.chdir(ROOT)
+    result = run(load_scenario(EXAMPLES, "greedy_policy"), write=False)
+    assert result.success, result.message
+    assert result.cake.reference.action_source.get_name() == "action_source"
+    assert type(result.cake.reference.action_source).__name__ == "GreedyTowerPolicy"
+
+
+def test_a_wrong_answer_from_the_language_model_is_refused_before_the_robot_moves(
+    monkeypatch, tmp_path
+):
+    monkeypatch.chdir(ROOT)
+    import examples.language_planner as planner
+
+    (tmp_path / "problem-5.txt").write_text("Robot: 1. pick up a, 2. stack a on e, 3. done")
+    monkeypatch.setattr(planner, "ANSWERS", tmp_path)
+    with pytest.raises(NoPlanError, match="step 1"):
+        run(load_scenario(EXAMPLES, "language_planner"), write=False)
+
+
+def test_the_language_planner_splits_numbered_steps():
+    sys.path.insert(0, str(ROOT))
+    from examples.language_planner import steps, to_action
+
+    assert steps("Robot: 1. unstack a from b, 2.put down a,3) done") == [
+        "unstack a from b",
+        "put down a",
+        "done",
+    ]
+    assert str(to_action("stack the c onto d")) == "(stack c d)"
+
+
+@pytest.mark.slow
+def test_the_recording_ik_keeps_every_query(tmp_path, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    import examples.recording_ik as recording
+
+    result = run(load_scenario(EXAMPLES, "recording_ik"), write=False)
+    assert result.success, result.message
+    solver = recording.MADE[-1]
+    assert (
+        len(solver.answers) == len(result.cake.ik.times_ms) == 3 * 10
+    )  # three waypoints an action
+    solver.save(tmp_path / "ik.npz")
+    assert (tmp_path / "ik.npz").stat().st_size > 1000
+
+
+@pytest.mark.slow
+def test_an_example_runs_from_the_command_line(tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--quiet", "--no-render",
+         "--scenario", str(EXAMPLES), "--name", "residual_controller", "--out", str(tmp_path)],
+        capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "computed-torque+residual" in (tmp_path / "summary.json").read_text()

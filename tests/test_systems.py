@@ -1,0 +1,108 @@
+"""Our two LeafSystems on their own: fixed inputs, evaluated outputs, as Drake tests systems."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.systems.analysis import Simulator
+
+from cake_drake.geometric.ik import Kinematics, make_solver
+from cake_drake.geometric.trajectory import PHASE_NAMES, Timing
+from cake_drake.geometric.waypoints import WaypointParams
+from cake_drake.symbolic import GroundAction
+from cake_drake.systems import ActionCommand, PlanSource
+from cake_drake.systems.waypoint_ik import (
+    REFERENCE_PORTS,
+    MotionSettings,
+    WaypointIk,
+    WorldIndices,
+)
+from cake_drake.world.scene import Q_HOME, SLOTS, X_HAND_GRASP
+
+PLAN = (GroundAction("unstack", ("a", "b")), GroundAction("put-down", ("a",)))
+
+
+@pytest.mark.parametrize("done, expected", [(0, PLAN[0]), (1, PLAN[1]), (2, None)])
+def test_plan_source_emits_the_action_after_those_done(done, expected):
+    source = PlanSource(PLAN)
+    context = source.CreateDefaultContext()
+    source.GetInputPort("actions_done").FixValue(context, [done])
+    command = source.GetOutputPort("action").Eval(context)
+    assert command == ActionCommand(done, expected)
+
+
+@pytest.fixture(scope="module")
+def waypoint_ik():
+    kin = Kinematics()
+    world = WorldIndices(
+        cube_bodies={"a": 1, "b": 2}, hand_body=0, X_hand_grasp=X_HAND_GRASP, slots=SLOTS
+    )
+    system = WaypointIk(
+        make_solver("drake", kin),
+        world,
+        Q_HOME,
+        kin.limits,
+        0.01,
+        MotionSettings(Timing(), WaypointParams()),
+    )
+    return system, kin
+
+
+def _poses(kin: Kinematics) -> list[RigidTransform]:
+    x, y = SLOTS[0]
+    yaw = np.arctan2(y, x)
+    X_hand = kin.pose(Q_HOME) @ X_HAND_GRASP.inverse()
+    return [
+        X_hand,
+        RigidTransform(RollPitchYaw(0, 0, yaw), [x, y, 0.06]),  # a, on b
+        RigidTransform(RollPitchYaw(0, 0, yaw), [x, y, 0.02]),  # b, on the table
+    ]
+
+
+def test_waypoint_ik_has_the_named_ports(waypoint_ik):
+    system, _ = waypoint_ik
+    for name, size in REFERENCE_PORTS.items():
+        assert system.GetOutputPort(name).size() == size
+    assert {system.get_input_port(i).get_name() for i in range(system.num_input_ports())} == {
+        "action",
+        "body_poses",
+    }
+
+
+def test_waypoint_ik_holds_the_start_until_an_action_comes(waypoint_ik):
+    system, kin = waypoint_ik
+    context = system.CreateDefaultContext()
+    system.GetInputPort("action").FixValue(context, ActionCommand(0, None))
+    system.GetInputPort("body_poses").FixValue(context, _poses(kin))
+    np.testing.assert_array_equal(
+        system.GetOutputPort("desired_state").Eval(context), np.r_[Q_HOME, np.zeros(7)]
+    )
+    np.testing.assert_array_equal(system.GetOutputPort("desired_acceleration").Eval(context), 0)
+    assert system.GetOutputPort("actions_done").Eval(context)[0] == 0
+    assert list(system.GetOutputPort("labels").Eval(context)) == [0, -1]
+
+
+def test_waypoint_ik_executes_an_unstack_from_fixed_poses(waypoint_ik):
+    system, kin = waypoint_ik
+    context = system.CreateDefaultContext()
+    system.GetInputPort("action").FixValue(context, ActionCommand(0, PLAN[0]))
+    poses = _poses(kin)
+    system.GetInputPort("body_poses").FixValue(context, poses)
+    simulator = Simulator(system, context)
+    seen_phases = set()
+    for t in np.arange(0.05, 6.0, 0.05):
+        simulator.AdvanceTo(t)
+        phase, action = system.GetOutputPort("labels").Eval(context)
+        seen_phases.add(PHASE_NAMES[int(phase)])
+        if system.GetOutputPort("actions_done").Eval(context)[0] == 1:
+            break
+    assert system.GetOutputPort("actions_done").Eval(context)[0] == 1
+    assert {"pre-grasp", "grasp", "lift"} <= seen_phases
+    # At the end the arm is lifted above a, the fingers commanded shut on it.
+    q = system.GetOutputPort("desired_state").Eval(context)[:7]
+    X = kin.pose(q)
+    np.testing.assert_allclose(X.translation()[:2], poses[1].translation()[:2], atol=1e-3)
+    assert X.translation()[2] > poses[1].translation()[2] + 0.03
+    assert system.GetOutputPort("finger_state").Eval(context)[0] == pytest.approx(0.0)
+    assert system.progress(context).error is None
