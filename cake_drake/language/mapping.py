@@ -143,6 +143,10 @@ class _NoSchema(Exception):
         self.need = need
 
 
+class _GoalNotInProblem(Exception):
+    """The transcript's goal names objects the problem lacks (a note, not bad input)."""
+
+
 class _Ambiguous(Exception):
     def __init__(self, message: str, candidates: tuple[str, ...], need: str):
         super().__init__(message)
@@ -479,7 +483,8 @@ def map_step(
     method, bindings = choose_method(verb, state, slots)
     if len(bindings) > 1:
         ways = "; ".join(", ".join(f"{k}={v}" for k, v in sorted(b.items())) for b in bindings)
-        cands = tuple(sorted({v for b in bindings for v in b.values()} - set(slots.values())))
+        varying = [k for k in bindings[0] if len({b[k] for b in bindings}) > 1]
+        cands = tuple(sorted({b[k] for b in bindings for k in varying}))
         return (
             StepResult(
                 step,
@@ -595,6 +600,14 @@ def problem_with_goal(problem: Problem, transcript: Transcript) -> Problem:
     body = goal if goal.lstrip().startswith("(") else f"({goal})"
     composed = f"{text[:-1]}\n  (:goal {body}))\n"
     where = f"{transcript.source}:{transcript.goal_line}"
+    predicates = set(problem.domain.predicates) | {"and", "not"}
+    names = set(re.findall(r"[a-z][a-z0-9_-]*", goal.lower())) - predicates
+    missing = sorted(n for n in names if n not in problem.object_types)
+    if missing and all(re.fullmatch(r"[a-z][a-z0-9_-]*", n) for n in missing):
+        raise _GoalNotInProblem(
+            f"the transcript's Goal: ({where}) names {', '.join(missing)}, which problem "
+            f"'{problem.name}' does not have: the goal is not checked"
+        )
     try:
         return parse_problem(problem.domain, composed, problem.problem_path)
     except InputError as e:
@@ -623,8 +636,11 @@ def analyse(
                 "is not used"
             )
         else:
-            problem = problem_with_goal(problem, transcript)
-            goal_from_transcript = True
+            try:
+                problem = problem_with_goal(problem, transcript)
+                goal_from_transcript = True
+            except _GoalNotInProblem as e:
+                notes.append(str(e))
     state = problem.init
     results: list[StepResult] = []
     actions: list[GroundAction] = []

@@ -95,8 +95,10 @@ def plain(text: str) -> str:
 def normalise(text: str) -> str:
     """Lower case, plain punctuation, single spaces, no trailing punctuation or 'and'."""
     text = re.sub(r"\s+", " ", plain(text).lower()).strip()
-    text = text.strip(" ,;:.!?\"'(-*")
-    text = re.sub(r"(,| and| then)+$", "", text).strip(" ,;:.!?\"'(-*")
+    before = None
+    while text != before:  # "and!, and" -> "": trailing punctuation and conjunctions, in turn
+        before = text
+        text = re.sub(r"(^|\s)(and|then)$", "", text.strip(" ,;:.!?\"'(-*"))
     return text
 
 
