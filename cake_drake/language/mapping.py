@@ -536,7 +536,7 @@ def map_step(
         )
         return result, new_state
     unmet_sorted = tuple(sorted(unmet))
-    need = "a step before it that makes true: " + ", ".join(assumed(f) for f in unmet_sorted)
+    need = ", ".join(assumed(f) for f in unmet_sorted)
     for f in unmet_sorted:
         if f[0] == "at-location" and f[1] == "robot":
             here = [a for a in actions[-1].args if ("at-location", a, f[2]) in state]

@@ -20,7 +20,6 @@ from cake_drake.language.mapping import (
     Analysis,
     StepResult,
     achiever,
-    assumed,
     gloss,
     side_by_side,
 )
@@ -167,9 +166,7 @@ def render_note(analysis: Analysis) -> list[str]:
     for r in sorted(methods, key=lambda r: r.step.number):
         needs.append(f"a method (step {r.step.number}): {r.need}")
     for r in by[PRECONDITION_FAILS]:
-        line = f"a precondition the language model assumed (step {r.step.number}): " + "; ".join(
-            assumed(f) for f in r.unmet
-        )
+        line = f"a precondition the language model assumed (step {r.step.number}): {r.need}"
         if analysis.planner_plan is not None:
             fixes = [
                 f"`{a}`"
