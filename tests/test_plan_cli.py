@@ -68,6 +68,7 @@ def test_generated_problem(tmp_path):
     r = plan_cli(D, str(p), "--planner", "gbfs-ff")
     assert r.returncode == 0, r.stderr
     assert "(satisficing)" in r.stdout and "--planner astar-lmcut finds the shortest" in r.stdout
+    assert "chosen by" not in r.stdout  # gbfs-ff was asked for: no portfolio
 
 
 def test_time_limit_exit_1_and_says_gave_up(tmp_path):
@@ -139,7 +140,10 @@ def test_bad_problem_files_exit_2_one_line(tmp_path, case):
         ([D, "/no/such/problem.pddl"], "no such PDDL problem file"),
         ([P, D], "this is a problem file, expected a domain file"),
         ([D], "expected DOMAIN and PROBLEM (or neither for the defaults), got 1 file"),
-        (["--planner", "ff"], "unknown planner 'ff' (choose from: astar-lmcut, astar-hmax, gbfs"),
+        (
+            ["--planner", "ff"],
+            "unknown planner 'ff' (choose from: auto, astar-lmcut, astar-hmax, wastar-ff",
+        ),
         (["--time-limit", "soon"], "argument --time-limit: invalid float value: 'soon'"),
         (["--time-limit", "0"], "time limit must be a positive number of seconds"),
         (["--frobnicate"], "unrecognized arguments: --frobnicate"),

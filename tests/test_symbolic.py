@@ -12,6 +12,7 @@ import pytest
 from cake_drake.errors import InputError, NoPlanError, PddlError
 from cake_drake.symbolic import (
     BLOCKSWORLD_DOMAIN,
+    DEFAULT_PLANNER,
     PLANNERS,
     PROBLEM_5,
     PROBLEM_5_OPTIMAL_LENGTH,
@@ -121,12 +122,24 @@ def test_gbfs_ff_is_satisficing_on_problem_5():
 
 
 def test_plan_note_names_planner_search_heuristic():
-    plan = solve(BLOCKSWORLD_DOMAIN, PROBLEM_5)
+    plan = solve(BLOCKSWORLD_DOMAIN, PROBLEM_5, "astar-lmcut")
     note = plan.note()
     assert note.startswith(
         "planner astar-lmcut: search A*, heuristic LM-cut, 10 actions (optimal), "
     )
     assert note.endswith(" ms")
+
+
+def test_default_auto_gets_the_optimal_10_and_says_who_found_it():
+    plan = solve(BLOCKSWORLD_DOMAIN, PROBLEM_5)
+    assert plan.requested == "auto" and plan.planner == "astar-lmcut"
+    assert plan.optimal and plan.length == PROBLEM_5_OPTIMAL_LENGTH
+    assert plan.note().endswith(
+        "; chosen by auto: astar-lmcut finished within its budget of 4303 evaluations"
+    )
+    text = format_plan(plan)
+    assert "; planner: astar-lmcut (optimal: no shorter plan exists)" in text
+    assert "; chosen by: auto (astar-lmcut finished within its budget" in text
 
 
 def test_pyperplan_logging_is_silenced_and_logging_left_as_found(caplog):
@@ -141,7 +154,8 @@ def test_pyperplan_logging_is_silenced_and_logging_left_as_found(caplog):
 
 def test_unknown_planner_lists_choices():
     with pytest.raises(
-        InputError, match="unknown planner 'fast'.*astar-lmcut, astar-hmax, gbfs-ff"
+        InputError,
+        match="unknown planner 'fast'.*auto, astar-lmcut, astar-hmax, wastar-ff, gbfs-ff",
     ):
         solve(BLOCKSWORLD_DOMAIN, PROBLEM_5, "fast")
 
@@ -398,7 +412,8 @@ def test_fast_downward_missing_names_the_extra(monkeypatch, problem5):
 
 
 def test_registry():
-    assert list(PLANNERS)[:3] == ["astar-lmcut", "astar-hmax", "gbfs-ff"]
+    assert list(PLANNERS)[:5] == ["auto", "astar-lmcut", "astar-hmax", "wastar-ff", "gbfs-ff"]
+    assert DEFAULT_PLANNER == "auto" and not PLANNERS["auto"].optimal
     assert {p for p, i in PLANNERS.items() if i.optimal} == {
         "astar-lmcut",
         "astar-hmax",

@@ -2,10 +2,15 @@
 
 Each step gets a verdict:
 
-- ``maps cleanly``: one skill, one ground action, applicable;
+- ``maps cleanly``: the words' literal reading, one ground action, applicable;
+- ``maps via a method``: one action, but not the one the words name literally --
+  the state chose it (an HTN method: "put down X" where an open container stands
+  is ``put-in``); the method and the reason are reported;
 - ``maps to several actions``: one skill, several ground actions (a decomposition
-  the language model did implicitly; an HTN method would state it);
+  the language model did implicitly; the method is reported);
 - ``precondition fails``: the action is not applicable; the unmet facts are named;
+- ``ambiguous``: a noun names several objects ("the counter"), or a method applies
+  in several ways; the candidates are listed;
 - ``no schema``: the verb or an object is not in the lexicon / domain / problem;
 - ``done``: the end marker; ``not reached``: after a step that failed;
   ``after done``: steps written after the end marker (ignored).
@@ -18,18 +23,19 @@ import itertools
 import re
 from dataclasses import dataclass, field
 
-from cake_drake.errors import CakeDrakeError
+from cake_drake.errors import CakeDrakeError, InputError
 from cake_drake.language.lexicon import (
     ARTICLES,
     END_PHRASES,
     GLOSSES,
     NOUN_ALIASES,
+    PACKAGING,
     PRONOUNS,
     VERBS,
-    MethodStep,
     Verb,
     verb_vocabulary,
 )
+from cake_drake.language.methods import Method, MethodStep, explain, method_bindings
 from cake_drake.language.transcript import Step, Transcript
 from cake_drake.symbolic import (
     Fact,
@@ -37,21 +43,34 @@ from cake_drake.symbolic import (
     Plan,
     Problem,
     fact_str,
+    parse_problem,
     solve_problem,
     validate_plan,
 )
 from cake_drake.symbolic.grounding import ground_action
 
 MAPS_CLEANLY = "maps cleanly"
+MAPS_VIA_METHOD = "maps via a method"
 MAPS_TO_SEVERAL = "maps to several actions"
 PRECONDITION_FAILS = "precondition fails"
+AMBIGUOUS = "ambiguous"
 NO_SCHEMA = "no schema"
 DONE = "done"
 NOT_REACHED = "not reached"
 AFTER_DONE = "after done"
 
 #: Verdicts of steps that were carried out.
-GOOD_VERDICTS = (MAPS_CLEANLY, MAPS_TO_SEVERAL, DONE)
+GOOD_VERDICTS = (MAPS_CLEANLY, MAPS_VIA_METHOD, MAPS_TO_SEVERAL, DONE)
+#: Verdicts of skill steps, in the order summaries list them.
+SKILL_VERDICTS = (
+    MAPS_CLEANLY,
+    MAPS_VIA_METHOD,
+    MAPS_TO_SEVERAL,
+    PRECONDITION_FAILS,
+    AMBIGUOUS,
+    NO_SCHEMA,
+    NOT_REACHED,
+)
 
 _MAX_BINDINGS = 20000
 _PARTICLES = {"up", "down", "on", "off", "away", "in", "out", "over", "back", "to", "for"}
@@ -59,7 +78,13 @@ _PARTICLES = {"up", "down", "on", "off", "away", "in", "out", "over", "back", "t
 
 @dataclass(frozen=True)
 class StepResult:
-    """The verdict for one transcript step, with the ground actions it became."""
+    """The verdict for one transcript step, with the ground actions it became.
+
+    ``actions`` are all the step's actions; when ``failed`` the last of them is the
+    one whose precondition fails (it was not applied). ``method`` is the method
+    that fired and ``why`` the reason, in words. ``need`` says what would have made
+    the step map cleanly (empty when it did).
+    """
 
     step: Step
     verdict: str
@@ -67,6 +92,17 @@ class StepResult:
     actions: tuple[GroundAction, ...] = ()
     detail: str = ""
     unmet: tuple[Fact, ...] = ()
+    method: Method | None = None
+    why: str = ""
+    failed: bool = False
+    candidates: tuple[str, ...] = ()
+    need: str = ""
+    resolved: tuple[tuple[str, str], ...] = ()  # (noun phrase, object) as read
+
+    @property
+    def applied(self) -> tuple[GroundAction, ...]:
+        """The actions that were carried out."""
+        return self.actions[:-1] if self.failed else self.actions
 
 
 @dataclass(frozen=True)
@@ -76,13 +112,15 @@ class Analysis:
     transcript: Transcript
     problem: Problem
     steps: tuple[StepResult, ...]
-    actions: tuple[GroundAction, ...]  # the transcribed plan, up to the first failing action
+    actions: tuple[GroundAction, ...]  # the transcribed plan's applied actions
     executable: bool
     final_state: frozenset[Fact]
     unmet_goals: tuple[Fact, ...] = ()
     planner_plan: Plan | None = None
     planner_error: str | None = None
     notes: tuple[str, ...] = field(default=())
+    failed_action: GroundAction | None = None  # the first action that is not applicable
+    goal_from_transcript: bool = False
 
     @property
     def goal_checked(self) -> bool:
@@ -93,9 +131,27 @@ class Analysis:
         """Every step maps and applies, and the goal (if the problem has one) is reached."""
         return self.executable and not self.unmet_goals
 
+    @property
+    def plan_actions(self) -> tuple[GroundAction, ...]:
+        """The transcribed plan as written: applied actions, then the failing one if any."""
+        return self.actions + ((self.failed_action,) if self.failed_action else ())
+
 
 class _NoSchema(Exception):
-    pass
+    def __init__(self, message: str, need: str = ""):
+        super().__init__(message)
+        self.need = need
+
+
+class _GoalNotInProblem(Exception):
+    """The transcript's goal names objects the problem lacks (a note, not bad input)."""
+
+
+class _Ambiguous(Exception):
+    def __init__(self, message: str, candidates: tuple[str, ...], need: str):
+        super().__init__(message)
+        self.candidates = candidates
+        self.need = need
 
 
 # ----------------------------------------------------------------------- the lexicon
@@ -144,28 +200,131 @@ def _listing(names, limit: int = 24) -> str:
     return shown if len(names) <= limit else f"{shown}, ... ({len(names) - limit} more)"
 
 
-def resolve_noun(phrase: str, problem: Problem, last: str | None) -> str:
-    """The problem object a noun phrase names; :class:`_NoSchema` naming the vocabulary."""
+def _spaced(name: str) -> str:
+    return name.replace("-", " ")
+
+
+def _strip_articles(phrase: str) -> str:
     words = phrase.split()
     while words and words[0] in ARTICLES:
         words = words[1:]
-    p = " ".join(words)
-    if p in PRONOUNS:
-        if last is None:
-            raise _NoSchema(f"'{phrase}' refers to nothing mentioned before")
-        return last
+    return " ".join(words)
+
+
+def _singulars(p: str) -> list[str]:
+    out = [p]
+    if p.endswith("ies"):
+        out.append(p[:-3] + "y")
+    if p.endswith("es"):
+        out.append(p[:-2])
+    if p.endswith("s"):
+        out.append(p[:-1])
+    return out
+
+
+def noun_candidates(phrase: str, problem: Problem) -> list[str]:
+    """The objects a noun phrase (articles already dropped) may name: none, one or several.
+
+    Exact name, then alias, then a plural read as singular, then a packaging word
+    dropped ("coke can", "can of coke"), then the head noun ("counter" ends both
+    "close counter" and "far counter").
+    """
     objects = problem.object_types
-    by_name = {o.replace("-", " "): o for o in objects} | {o: o for o in objects}
-    tries = [p] + ([p[:-1]] if p.endswith("s") else []) + ([p[:-2]] if p.endswith("es") else [])
-    for t in tries:
+    by_name = {_spaced(o): o for o in objects} | {o: o for o in objects}
+    forms = _singulars(phrase)
+    for t in forms:
         if t in by_name:
-            return by_name[t]
+            return [by_name[t]]
         if t in NOUN_ALIASES and NOUN_ALIASES[t] in objects:
-            return NOUN_ALIASES[t]
+            return [NOUN_ALIASES[t]]
+    words = phrase.split()
+    if len(words) >= 2 and words[-1] in PACKAGING:
+        found = noun_candidates(" ".join(words[:-1]), problem)
+        if found:
+            return found
+    if len(words) >= 3 and words[0] in PACKAGING and words[1] == "of":
+        found = noun_candidates(" ".join(words[2:]), problem)
+        if found:
+            return found
+    for t in forms:
+        heads = sorted({o for name, o in by_name.items() if name.endswith(" " + t)})
+        if heads:
+            return heads
+    return []
+
+
+@dataclass
+class _Reference:
+    """What "it" stands for: the last item resolved, or the last item phrase that was not."""
+
+    item: str | None = None
+    unresolved: tuple[str, int] | None = None  # (phrase, step number)
+
+
+def _request_hint(request: str, candidates: tuple[str, ...]) -> str:
+    text = " " + re.sub(r"[^a-z0-9 ]+", " ", request.lower()) + " "
+    named = [c for c in candidates if f" {_spaced(c)} " in text]
+    if len(named) == 1:
+        return f"; the request names '{_spaced(named[0])}'"
+    return ""
+
+
+def resolve_noun(
+    phrase: str, problem: Problem, ref: _Reference, request: str = "", step: int = 0
+) -> str:
+    """The problem object a noun phrase names; :class:`_NoSchema` or :class:`_Ambiguous`."""
+    p = _strip_articles(phrase)
+    if p in PRONOUNS:
+        if ref.item is not None:
+            return ref.item
+        if ref.unresolved is not None:
+            said, where = ref.unresolved
+            raise _NoSchema(
+                f"'{p}' stands for '{said}' (step {where}), which names no object of "
+                f"problem '{problem.name}'",
+                need=f"'{_strip_articles(said)}' among the problem's objects",
+            )
+        raise _NoSchema(
+            f"'{p}' refers to nothing: no earlier step names an item",
+            need="an earlier step that names the item 'it' stands for",
+        )
+    found = noun_candidates(p, problem) if p else []
+    if len(found) == 1:
+        return found[0]
+    if len(found) > 1:
+        cands = tuple(found)
+        hint = _request_hint(request, cands)
+        raise _Ambiguous(
+            f"'{p}' is ambiguous in problem '{problem.name}': it may be "
+            f"{', '.join(cands[:-1])} or {cands[-1]}{hint}",
+            cands,
+            need=f"a referring expression resolved to one object ({' or '.join(cands)})" + hint,
+        )
+    if step and p and ref is not None:
+        ref.unresolved = (p, step)
     raise _NoSchema(
         f"'{p or phrase}' is not an object of problem '{problem.name}' "
-        f"(objects: {_listing(sorted(objects))})"
+        f"(objects: {_listing(sorted(problem.object_types))})",
+        need=f"'{p or phrase}' among the problem's objects, with its initial place",
     )
+
+
+def _resolve_slots(
+    verb: Verb, phrases: dict[str, str], problem: Problem, ref: _Reference, request: str, step: int
+) -> dict[str, str]:
+    """Resolve the step's noun slots, keeping track of what "it" will stand for."""
+    slots: dict[str, str] = {}
+    for k in sorted(phrases):
+        item_slot = k == "x" and verb.x_is_item
+        try:
+            slots[k] = resolve_noun(phrases[k], problem, ref, request, step if item_slot else 0)
+        except _Ambiguous:
+            if item_slot:
+                ref.item, ref.unresolved = None, (_strip_articles(phrases[k]), step)
+            raise
+        if item_slot:
+            ref.item, ref.unresolved = slots[k], None
+    return slots
 
 
 # ----------------------------------------------------------------------- binding
@@ -186,15 +345,19 @@ def _place_of(problem: Problem, state: frozenset[Fact], obj: str, want: str) -> 
 
 
 def _bind(
-    problem: Problem, state: frozenset[Fact], ms: MethodStep, slots: dict[str, str]
+    problem: Problem, state: frozenset[Fact], ms: MethodStep, values: dict[str, str]
 ) -> tuple[GroundAction, frozenset[Fact], list[str]]:
-    """Ground one method step in ``state``: (action, unmet preconditions, notes)."""
+    """Ground one method step in ``state``: (action, unmet preconditions, notes).
+
+    ``values`` holds the noun slots (``x``, ``y``) and the method's variables (``?c``).
+    """
     domain = problem.domain
     schema = domain.actions.get(ms.schema)
     if schema is None:
         raise _NoSchema(
             f"domain '{domain.name}' has no action '{ms.schema}' "
-            f"(actions: {', '.join(sorted(domain.actions))})"
+            f"(actions: {', '.join(sorted(domain.actions))})",
+            need=f"an action schema '{ms.schema}' in the domain",
         )
     types = dict(schema.params)
     fixed: dict[str, str] = {}
@@ -202,11 +365,14 @@ def _bind(
     for param, source in ms.args:
         if param not in types:
             raise _NoSchema(f"action {schema.signature()} has no parameter {param}")
-        obj = slots.get(source, source)
+        if source.startswith("?") and source not in values:
+            continue  # an unbound method variable: bound from the state below
+        obj = values.get(source, source)
         if obj not in problem.object_types:
             raise _NoSchema(
                 f"'{obj}' is not an object of problem '{problem.name}' "
-                f"(objects: {_listing(sorted(problem.object_types))})"
+                f"(objects: {_listing(sorted(problem.object_types))})",
+                need=f"'{obj}' among the problem's objects",
             )
         want, have = types[param], problem.object_types[obj]
         if domain.is_subtype(have, want):
@@ -215,7 +381,9 @@ def _bind(
         place = _place_of(problem, state, obj, want)
         if place is None:
             raise _NoSchema(
-                f"'{obj}' has type '{have}' but {param} of {schema.signature()} needs type '{want}'"
+                f"'{obj}' has type '{have}' but {param} of {schema.signature()} "
+                f"needs type '{want}'",
+                need=f"a reading of a {have} where {schema.name} needs a {want}",
             )
         fixed[param] = place
         notes.append(f"'{obj}' read as its place, {place}")
@@ -253,82 +421,200 @@ def gloss(fact: Fact) -> str:
     return "the " + text if text.startswith("robot ") else text
 
 
-def _try_method(problem, state, method, slots):
-    """Apply a method's steps in turn: (actions, state, unmet, notes) or _NoSchema."""
+def assumed(fact: Fact) -> str:
+    """What a plan took for granted, in plain words: ``the robot is at far-counter``."""
+    return gloss(fact).replace(" is not ", " is ").replace("cannot", "can")
+
+
+def _try_method(problem, state, method: Method, values: dict[str, str]):
+    """Apply a method's actions in turn: (actions, state, unmet, notes) or _NoSchema."""
     actions: list[GroundAction] = []
     notes: list[str] = []
-    for ms in method:
-        action, unmet, more = _bind(problem, state, ms, slots)
+    for ms in method.steps:
+        action, unmet, more = _bind(problem, state, ms, values)
         actions.append(action)
         notes += more
         if unmet:
             return actions, state, unmet, notes
-        op = ground_action(problem, action)
-        state = op.apply(state)
+        state = ground_action(problem, action).apply(state)
     return actions, state, frozenset(), notes
 
 
+def choose_method(
+    verb: Verb, state: frozenset[Fact], slots: dict[str, str]
+) -> tuple[Method, list[dict[str, str]]]:
+    """The first of the skill's methods whose precondition holds, with its bindings."""
+    for method in verb.methods:
+        bindings = method_bindings(method, state, slots)
+        if bindings:
+            return method, bindings
+    # No method applies (a skill without a literal reading): report the last one.
+    return verb.methods[-1], []
+
+
 def map_step(
-    problem: Problem, state: frozenset[Fact], step: Step, last: str | None
-) -> tuple[StepResult, frozenset[Fact], str | None]:
-    """Verdict for one step in ``state``: (result, next state, last object mentioned)."""
+    problem: Problem,
+    state: frozenset[Fact],
+    step: Step,
+    ref: _Reference,
+    request: str = "",
+) -> tuple[StepResult, frozenset[Fact]]:
+    """Verdict for one step in ``state``: (result, next state); ``ref`` is updated."""
     if step.text in END_PHRASES:
-        return StepResult(step, DONE, "done", detail="end of the robot's plan"), state, last
+        return StepResult(step, DONE, "done", detail="end of the robot's plan"), state
     if not step.text:
-        return StepResult(step, NO_SCHEMA, detail="the step is empty"), state, last
+        return StepResult(step, NO_SCHEMA, detail="the step is empty"), state
     matched = match_verb(step.text)
     if matched is None:
-        return StepResult(step, NO_SCHEMA, detail=unknown_verb_message(step.text)), state, last
+        msg = unknown_verb_message(step.text)
+        need = f"a skill and action schema for '{_leading_verb(step.text)}'"
+        return StepResult(step, NO_SCHEMA, detail=msg, need=need), state
     verb, phrases = matched
     try:
-        slots = {k: resolve_noun(v, problem, last) for k, v in phrases.items()}
-    except _NoSchema as e:
-        return StepResult(step, NO_SCHEMA, verb.skill, detail=str(e)), state, last
-    last = slots.get("x", last)
-    failures = []
-    for method in verb.methods:
-        try:
-            actions, new_state, unmet, notes = _try_method(problem, state, method, slots)
-        except _NoSchema as e:
-            failures.append((1, 0, StepResult(step, NO_SCHEMA, verb.skill, detail=str(e))))
-            continue
-        if not unmet:
-            verdict = MAPS_CLEANLY if len(actions) == 1 else MAPS_TO_SEVERAL
-            detail = "; ".join(notes)
-            if len(actions) > 1:
-                detail = "; ".join(
-                    [f"one skill, {len(actions)} actions (an implicit decomposition)", *notes]
-                )
-            return StepResult(step, verdict, verb.skill, tuple(actions), detail), new_state, last
-        unmet_sorted = tuple(sorted(unmet))
-        detail = "unmet " + ", ".join(f"{fact_str(f)}: {gloss(f)}" for f in unmet_sorted)
-        if notes:
-            detail += "; " + "; ".join(notes)
+        slots = _resolve_slots(verb, phrases, problem, ref, request, step.number)
+    except _Ambiguous as e:
         result = StepResult(
-            step, PRECONDITION_FAILS, verb.skill, tuple(actions), detail, unmet_sorted
+            step, AMBIGUOUS, verb.skill, detail=str(e), candidates=e.candidates, need=e.need
         )
-        failures.append((0, len(unmet), result))
-    failures.sort(key=lambda f: (f[0], f[1]))
-    return failures[0][2], state, last
+        return result, state
+    except _NoSchema as e:
+        return StepResult(step, NO_SCHEMA, verb.skill, detail=str(e), need=e.need), state
+    resolved = tuple((phrases[k], slots[k]) for k in sorted(slots))
+    method, bindings = choose_method(verb, state, slots)
+    if len(bindings) > 1:
+        ways = "; ".join(", ".join(f"{k}={v}" for k, v in sorted(b.items())) for b in bindings)
+        varying = [k for k in bindings[0] if len({b[k] for b in bindings}) > 1]
+        cands = tuple(sorted({b[k] for b in bindings for k in varying}))
+        return (
+            StepResult(
+                step,
+                AMBIGUOUS,
+                verb.skill,
+                detail=f"method {method.name} applies in {len(bindings)} ways ({ways})",
+                method=method,
+                candidates=cands,
+                need="a choice between " + " and ".join(cands),
+                resolved=resolved,
+            ),
+            state,
+        )
+    binding = bindings[0] if bindings else {}
+    why = explain(method, slots, binding) if not method.literal else ""
+    try:
+        actions, new_state, unmet, notes = _try_method(problem, state, method, slots | binding)
+    except _NoSchema as e:
+        result = StepResult(
+            step,
+            NO_SCHEMA,
+            verb.skill,
+            detail=str(e),
+            method=method,
+            need=e.need,
+            resolved=resolved,
+        )
+        return result, state
+    if not unmet:
+        if len(actions) > 1:
+            verdict = MAPS_TO_SEVERAL
+            need = f"'{verb.skill}' = {' + '.join(a.name for a in actions)} when {why}"
+        elif method.literal:
+            verdict, need = MAPS_CLEANLY, ""
+        else:
+            verdict = MAPS_VIA_METHOD
+            need = f"'{verb.skill}' = {actions[0].name} when {why}"
+        parts = ([f"method {method.name}: {why}"] if why else []) + notes
+        result = StepResult(
+            step,
+            verdict,
+            verb.skill,
+            tuple(actions),
+            "; ".join(parts),
+            method=method,
+            why=why,
+            need=need,
+            resolved=resolved,
+        )
+        return result, new_state
+    unmet_sorted = tuple(sorted(unmet))
+    need = ", ".join(assumed(f) for f in unmet_sorted)
+    for f in unmet_sorted:
+        if f[0] == "at-location" and f[1] == "robot":
+            here = [a for a in actions[-1].args if ("at-location", a, f[2]) in state]
+            if here:
+                need += f" (a 'find {_spaced(here[0])}' step would have taken it there)"
+    detail = "unmet " + ", ".join(f"{fact_str(f)}: {gloss(f)}" for f in unmet_sorted)
+    if why:
+        detail = f"method {method.name}: {why}; " + detail
+    if notes:
+        detail += "; " + "; ".join(notes)
+    result = StepResult(
+        step,
+        PRECONDITION_FAILS,
+        verb.skill,
+        tuple(actions),
+        detail,
+        unmet_sorted,
+        method=method,
+        why=why,
+        failed=True,
+        need=need,
+        resolved=resolved,
+    )
+    return result, state
 
 
 def lexical_verdict(
-    problem: Problem, step: Step, last: str | None
-) -> tuple[str | None, str | None]:
-    """For steps that are not simulated: a no-schema reason found without a state, if any."""
+    problem: Problem, step: Step, ref: _Reference, request: str = ""
+) -> StepResult | None:
+    """For steps that are not simulated: a no-schema or ambiguity found without a state."""
     if step.text in END_PHRASES:
-        return None, last
+        return None
     if not step.text:
-        return "the step is empty", last
+        return StepResult(step, NO_SCHEMA, detail="the step is empty")
     matched = match_verb(step.text)
     if matched is None:
-        return unknown_verb_message(step.text), last
-    _, phrases = matched
+        need = f"a skill and action schema for '{_leading_verb(step.text)}'"
+        return StepResult(step, NO_SCHEMA, detail=unknown_verb_message(step.text), need=need)
+    verb, phrases = matched
     try:
-        slots = {k: resolve_noun(v, problem, last) for k, v in phrases.items()}
+        _resolve_slots(verb, phrases, problem, ref, request, step.number)
+    except _Ambiguous as e:
+        return StepResult(
+            step, AMBIGUOUS, verb.skill, detail=str(e), candidates=e.candidates, need=e.need
+        )
     except _NoSchema as e:
-        return str(e), last
-    return None, slots.get("x", last)
+        return StepResult(step, NO_SCHEMA, verb.skill, detail=str(e), need=e.need)
+    return None
+
+
+# ----------------------------------------------------------------------- goals
+
+
+def problem_with_goal(problem: Problem, transcript: Transcript) -> Problem:
+    """``problem`` with the transcript's ``Goal:`` added (the problem must have none)."""
+    goal = transcript.goal
+    assert goal is not None and not problem.has_goal
+    text = problem.text.rstrip()
+    if not text.endswith(")"):
+        raise InputError(f"{problem.problem_path}: cannot add a goal to this problem text")
+    body = goal if goal.lstrip().startswith("(") else f"({goal})"
+    composed = f"{text[:-1]}\n  (:goal {body}))\n"
+    where = f"{transcript.source}:{transcript.goal_line}"
+    predicates = set(problem.domain.predicates) | {"and", "not"}
+    names = set(re.findall(r"[a-z][a-z0-9_-]*", goal.lower())) - predicates
+    missing = sorted(n for n in names if n not in problem.object_types)
+    if missing and all(re.fullmatch(r"[a-z][a-z0-9_-]*", n) for n in missing):
+        raise _GoalNotInProblem(
+            f"the transcript's Goal: ({where}) names {', '.join(missing)}, which problem "
+            f"'{problem.name}' does not have: the goal is not checked"
+        )
+    try:
+        return parse_problem(problem.domain, composed, problem.problem_path)
+    except InputError as e:
+        msg = str(e)
+        if msg.startswith(problem.problem_path):
+            msg = msg.split(": ", 1)[-1]
+        raise InputError(f"{where}: Goal: {goal}: {msg}") from None
 
 
 # ----------------------------------------------------------------------- the whole transcript
@@ -341,10 +627,25 @@ def analyse(
     time_limit: float | None = 30.0,
 ) -> Analysis:
     """Map and simulate every step, check the goal, and plan the same problem."""
+    notes = list(transcript.notes)
+    goal_from_transcript = False
+    if transcript.goal is not None:
+        if problem.has_goal:
+            notes.append(
+                f"the problem has a goal; the transcript's Goal: line ({transcript.goal}) "
+                "is not used"
+            )
+        else:
+            try:
+                problem = problem_with_goal(problem, transcript)
+                goal_from_transcript = True
+            except _GoalNotInProblem as e:
+                notes.append(str(e))
     state = problem.init
     results: list[StepResult] = []
     actions: list[GroundAction] = []
-    last: str | None = None
+    ref = _Reference()
+    failed_action: GroundAction | None = None
     failed = False
     ended = False
     for step in transcript.steps:
@@ -352,24 +653,25 @@ def analyse(
             results.append(StepResult(step, AFTER_DONE, detail="written after 'done'; ignored"))
             continue
         if failed:
-            reason, last = lexical_verdict(problem, step, last)
-            if reason is not None:
-                results.append(StepResult(step, NO_SCHEMA, detail=reason))
+            lexical = lexical_verdict(problem, step, ref, transcript.request)
+            if lexical is not None:
+                results.append(lexical)
             elif step.text in END_PHRASES:
                 results.append(StepResult(step, DONE, "done", detail="end of the robot's plan"))
                 ended = True
             else:
                 results.append(StepResult(step, NOT_REACHED, detail="an earlier step failed"))
             continue
-        result, state, last = map_step(problem, state, step, last)
+        result, state = map_step(problem, state, step, ref, transcript.request)
         results.append(result)
-        actions.extend(result.actions)
+        actions.extend(result.applied)
+        if result.failed:
+            failed_action = result.actions[-1]
         if result.verdict == DONE:
             ended = True
         elif result.verdict not in GOOD_VERDICTS:
             failed = True
 
-    notes = list(transcript.notes)
     if not ended:
         notes.append("the transcript has no final 'done' step")
     executable = not failed
@@ -397,13 +699,30 @@ def analyse(
         planned,
         planner_error,
         tuple(notes),
+        failed_action,
+        goal_from_transcript,
     )
 
 
+def achiever(problem: Problem, plan: tuple[GroundAction, ...], fact: Fact) -> GroundAction | None:
+    """The first action of ``plan`` that makes ``fact`` true, if any."""
+    for action in plan:
+        if fact in ground_action(problem, action).add:
+            return action
+    return None
+
+
 def side_by_side(
-    left: tuple[GroundAction, ...], right: tuple[GroundAction, ...]
+    left: tuple[GroundAction, ...],
+    right: tuple[GroundAction, ...],
+    failed: GroundAction | None = None,
 ) -> list[tuple[str, str, str]]:
-    """Align two plans: rows of (marker, left, right); '=' same, '~' differs, '<' / '>' only one."""
+    """Align two plans: rows of (marker, left, right).
+
+    ``=`` same action, ``~`` differs, ``<`` / ``>`` only on one side; ``x`` the
+    transcript's failing action (not applied, so never matched nor counted), placed
+    after the applied actions it follows.
+    """
     a, b = [str(x) for x in left], [str(x) for x in right]
     rows: list[tuple[str, str, str]] = []
     matcher = difflib.SequenceMatcher(None, a, b, autojunk=False)
@@ -416,4 +735,7 @@ def side_by_side(
             la = a[i1 + k] if i1 + k < i2 else ""
             rb = b[j1 + k] if j1 + k < j2 else ""
             rows.append(("~" if la and rb else "<" if la else ">", la, rb))
+    if failed is not None:
+        last_left = max((i for i, (_, la, _) in enumerate(rows) if la), default=-1)
+        rows.insert(last_left + 1, ("x", str(failed), ""))
     return rows

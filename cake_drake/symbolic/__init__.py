@@ -3,17 +3,22 @@
 Parsing with positions (:mod:`.pddl`), grounding and STRIPS semantics
 (:mod:`.grounding`), a registry of planners (:mod:`.planners`), plan files
 (:mod:`.plans`), VAL-like validation (:mod:`.validation`), diagnosis of
-unsolvable problems (:mod:`.diagnose`) and Blocksworld helpers
-(:mod:`.blocksworld`). Facts are tuples of lower-case strings:
-``("on", "a", "b")``, ``("arm-empty",)``.
+unsolvable problems (:mod:`.diagnose`), Blocksworld read by structure
+(:mod:`.roles`: which predicate means "on", which action picks, whatever the
+names) and Blocksworld helpers and generators (:mod:`.blocksworld`). Facts are
+tuples of lower-case strings: ``("on", "a", "b")``, ``("arm-empty",)``.
 """
 
 from cake_drake import MODELS_DIR
 from cake_drake.symbolic.blocksworld import (
+    NAMINGS,
+    Naming,
+    block_names,
     blocks_problem,
     check_goal,
     check_state,
     is_blocksworld,
+    problem_text,
     random_problem,
     tower_facts,
     towers,
@@ -41,6 +46,7 @@ from cake_drake.symbolic.pddl import (
     parse_problem,
 )
 from cake_drake.symbolic.planners import (
+    AUTO_STAGES,
     DEFAULT_PLANNER,
     PLANNERS,
     PlannerInfo,
@@ -49,18 +55,51 @@ from cake_drake.symbolic.planners import (
     solve_problem,
 )
 from cake_drake.symbolic.plans import Plan, format_plan, parse_plan_text, read_plan, write_plan
+from cake_drake.symbolic.roles import (
+    CANONICAL,
+    PICK,
+    PLACE,
+    ActionRole,
+    BlocksworldRoles,
+    BlocksworldView,
+    GroundRole,
+    Vocabulary,
+    blocksworld_roles,
+    blocksworld_view,
+    canonical_action,
+)
 from cake_drake.symbolic.validation import ValidationResult, validate_plan
 
 #: The shipped Blocksworld domain and the five-block problem of the exercise.
 BLOCKSWORLD_DOMAIN = MODELS_DIR / "pddl" / "blocksworld.pddl"
 PROBLEM_5 = MODELS_DIR / "pddl" / "problem_5.pddl"
 
+#: Blocksworld domains under other names, read by structure: IPC, typed, renamed.
+VARIANTS_DIR = MODELS_DIR / "pddl" / "variants"
+
 #: Length of the shortest plan for PROBLEM_5 (proved by A* with LM-cut).
 PROBLEM_5_OPTIMAL_LENGTH = 10
 
 __all__ = [
+    "AUTO_STAGES",
     "BLOCKSWORLD_DOMAIN",
+    "CANONICAL",
     "DEFAULT_PLANNER",
+    "NAMINGS",
+    "PICK",
+    "PLACE",
+    "VARIANTS_DIR",
+    "ActionRole",
+    "BlocksworldRoles",
+    "BlocksworldView",
+    "GroundRole",
+    "Naming",
+    "Vocabulary",
+    "block_names",
+    "blocksworld_roles",
+    "blocksworld_view",
+    "canonical_action",
+    "problem_text",
     "PLANNERS",
     "PROBLEM_5",
     "PROBLEM_5_OPTIMAL_LENGTH",

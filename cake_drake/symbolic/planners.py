@@ -3,6 +3,12 @@
 :data:`PLANNERS` is the registry; :func:`solve` plans from files and
 :func:`solve_problem` from a parsed :class:`Problem`. Every returned plan is
 re-checked with the validator before it is handed out.
+
+The default, ``auto``, is a portfolio (:data:`AUTO_STAGES`): A* with LM-cut
+within a work budget (optimal when it finishes), then weighted A* with hFF
+within a budget, then greedy best-first with hFF. Budgets count heuristic
+evaluations, not seconds, so the same problem gets the same plan on every
+machine; the plan records which stage produced it and why.
 """
 
 from __future__ import annotations
@@ -15,7 +21,11 @@ from pathlib import Path
 
 from pyperplan.heuristics.lm_cut import LmCutHeuristic
 from pyperplan.heuristics.relaxation import hFFHeuristic, hMaxHeuristic
-from pyperplan.search.a_star import astar_search, greedy_best_first_search
+from pyperplan.search.a_star import (
+    astar_search,
+    greedy_best_first_search,
+    weighted_astar_search,
+)
 
 from cake_drake.errors import CakeDrakeError, InputError, NoPlanError
 from cake_drake.symbolic import fast_downward
@@ -34,7 +44,7 @@ class PlannerInfo:
     search: str
     heuristic: str
     optimal: bool
-    backend: str  # "pyperplan" (in-process) or "fast-downward" (subprocess, `fd` extra)
+    backend: str  # "pyperplan" (in-process), "fast-downward" (subprocess, `fd` extra), "portfolio"
     summary: str
 
 
@@ -43,12 +53,21 @@ PLANNERS: dict[str, PlannerInfo] = {
     p.name: p
     for p in (
         PlannerInfo(
+            "auto",
+            "portfolio: A* (budget), then weighted A*, then greedy best-first",
+            "LM-cut, then hFF",
+            False,
+            "portfolio",
+            "the default: optimal A*+LM-cut when it finishes within its budget (~3 s), "
+            "else wastar-ff, else gbfs-ff; the plan says which",
+        ),
+        PlannerInfo(
             "astar-lmcut",
             "A*",
             "LM-cut",
             True,
             "pyperplan",
-            "optimal; the default (fast up to ~8 blocks)",
+            "optimal (fast up to ~8 blocks; 10-12 blocks may take minutes)",
         ),
         PlannerInfo(
             "astar-hmax",
@@ -57,6 +76,14 @@ PLANNERS: dict[str, PlannerInfo] = {
             True,
             "pyperplan",
             "optimal; weaker heuristic than LM-cut, for comparison",
+        ),
+        PlannerInfo(
+            "wastar-ff",
+            "weighted A* (w = 2) with preferred operators",
+            "hFF",
+            False,
+            "pyperplan",
+            "satisficing; shorter plans than gbfs-ff, a little slower",
         ),
         PlannerInfo(
             "gbfs-ff",
@@ -85,7 +112,38 @@ PLANNERS: dict[str, PlannerInfo] = {
     )
 }
 
-DEFAULT_PLANNER = "astar-lmcut"
+DEFAULT_PLANNER = "auto"
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage of the ``auto`` portfolio: a planner and its work budget (None: no budget).
+
+    The budget caps ``evaluations * operators ** exponent``: the cost of one
+    heuristic evaluation grows with the number of ground operators (LM-cut's
+    about as its 1.5th power, measured on Blocksworld from 5 to 12 blocks;
+    hFF's about linearly), so a budget in these units takes about the same
+    time at any problem size, and, unlike a clock, gives the same answer on
+    every machine.
+    """
+
+    planner: str
+    budget: float | None
+    exponent: float = 1.0
+
+    def max_evaluations(self, n_operators: int) -> int | None:
+        if self.budget is None:
+            return None
+        return max(1, int(self.budget / max(1, n_operators) ** self.exponent))
+
+
+#: The ``auto`` portfolio. With ~1.6 us per LM-cut evaluation and operator^1.5 and
+#: ~5 us per hFF evaluation and operator (2-core Xeon), each budget is about 3 s.
+AUTO_STAGES = (
+    Stage("astar-lmcut", 2.0e6, 1.5),
+    Stage("wastar-ff", 6.0e5, 1.0),
+    Stage("gbfs-ff", None),
+)
 
 _FD_ALIASES = {"fd-lama-first": "lama-first", "fd-seq-opt-lmcut": "seq-opt-lmcut"}
 
@@ -119,20 +177,28 @@ class _TimeUp(Exception):
     pass
 
 
-class _Deadline:
-    """Wraps a pyperplan heuristic: counts evaluations and stops the search at a deadline.
+class _BudgetUp(Exception):
+    pass
 
-    Every generated node is evaluated, so checking the clock here bounds the
-    search time without threads or subprocesses.
+
+class _Deadline:
+    """Wraps a pyperplan heuristic: counts evaluations and stops the search at a
+    deadline (:class:`_TimeUp`) or after ``max_evaluations`` (:class:`_BudgetUp`).
+
+    Every generated node is evaluated, so checking here bounds the search
+    without threads or subprocesses.
     """
 
-    def __init__(self, heuristic, deadline: float | None):
+    def __init__(self, heuristic, deadline: float | None, max_evaluations: int | None = None):
         self._h = heuristic
         self._deadline = deadline
+        self._max = max_evaluations
         self.evaluations = 0
 
     def _tick(self) -> None:
         self.evaluations += 1
+        if self._max is not None and self.evaluations > self._max:
+            raise _BudgetUp
         if self._deadline is not None and time.perf_counter() > self._deadline:
             raise _TimeUp
 
@@ -164,20 +230,33 @@ def _quiet_pyperplan():
             root.removeHandler(guard)
 
 
-def _pyperplan_search(name: str, task, deadline: float | None):
-    """Run the search for ``name``; returns (operators or None, evaluation count)."""
+def _pyperplan_search(
+    name: str, task, deadline: float | None, max_evaluations: int | None = None
+) -> tuple[list | None, int]:
+    """Run the search for ``name``; returns (operators or None, evaluation count).
+
+    Raises :class:`_TimeUp` at the deadline and :class:`_BudgetUp` after
+    ``max_evaluations`` heuristic evaluations (both searches of a preferred-
+    operator planner together).
+    """
     if name == "astar-lmcut":
-        h = _Deadline(_LmCut(task), deadline)
+        h = _Deadline(_LmCut(task), deadline, max_evaluations)
         return astar_search(task, h), h.evaluations
     if name == "astar-hmax":
-        h = _Deadline(hMaxHeuristic(task), deadline)
+        h = _Deadline(hMaxHeuristic(task), deadline, max_evaluations)
         return astar_search(task, h), h.evaluations
-    if name == "gbfs-ff":
-        h = _Deadline(hFFHeuristic(task), deadline)
-        ops = greedy_best_first_search(task, h, use_relaxed_plan=True)
+    if name in ("gbfs-ff", "wastar-ff"):
+        h = _Deadline(hFFHeuristic(task), deadline, max_evaluations)
+
+        def search(preferred: bool):
+            if name == "gbfs-ff":
+                return greedy_best_first_search(task, h, use_relaxed_plan=preferred)
+            return weighted_astar_search(task, h, weight=2, use_relaxed_plan=preferred)
+
+        ops = search(True)
         if ops is None:
-            # Preferred-operator pruning can lose every plan; plain GBFS is complete.
-            ops = greedy_best_first_search(task, h, use_relaxed_plan=False)
+            # Preferred-operator pruning can lose every plan; the plain search is complete.
+            ops = search(False)
         return ops, h.evaluations
     raise AssertionError(name)
 
@@ -193,12 +272,77 @@ def _no_plan_message(problem: Problem, why: str) -> str:
 
 
 def _gave_up_message(problem: Problem, planner: str, time_limit: float, detail: str) -> str:
-    other = "gbfs-ff" if planner != "gbfs-ff" else "fd-lama-first"
+    other = "gbfs-ff" if planner not in ("gbfs-ff", "auto") else "fd-lama-first"
     return (
         f"no plan found for problem '{problem.name}' within the {time_limit:g} s time limit: "
         f"planner {planner} gave up {detail}; this does not prove that no plan exists "
         f"(try a larger --time-limit or --planner {other})"
     )
+
+
+def _out_of_memory(problem: Problem, planner: str, other: str) -> NoPlanError:
+    return NoPlanError(
+        f"no plan found for problem '{problem.name}': planner {planner} ran out of "
+        f"memory; this does not prove that no plan exists (try --planner {other})"
+    )
+
+
+def _fast_downward(problem: Problem, planner: str, time_limit: float | None):
+    result = fast_downward.run(problem, _FD_ALIASES[planner], planner, time_limit)
+    if result.status == "limit":
+        raise NoPlanError(_gave_up_message(problem, planner, time_limit or 0, "at the limit"))
+    if result.status == "memory":
+        raise _out_of_memory(problem, planner, "fd-lama-first")
+    if result.status == "incomplete":
+        raise NoPlanError(
+            f"no plan found for problem '{problem.name}': planner {planner} ran out of "
+            "states to explore, but its search is incomplete, so this proves nothing"
+        )
+    if result.status == "unsolvable":
+        raise NoPlanError(_no_plan_message(problem, f"{planner} proved it unsolvable"))
+    return result.actions
+
+
+def _search(problem: Problem, search_task, planner: str, deadline, max_evaluations=None):
+    """One pyperplan search; its actions, or :class:`NoPlanError` when it proves there
+    are none. :class:`_TimeUp` / :class:`_BudgetUp` pass through."""
+    try:
+        with _quiet_pyperplan():
+            ops, evaluations = _pyperplan_search(
+                planner, search_task.task, deadline, max_evaluations
+            )
+    except MemoryError:
+        raise _out_of_memory(problem, planner, "gbfs-ff") from None
+    if ops is None:
+        raise NoPlanError(
+            _no_plan_message(
+                problem, f"{planner} searched every reachable state ({evaluations} evaluated)"
+            )
+        )
+    return tuple(search_task.actions[op.name] for op in ops)
+
+
+def _auto(problem: Problem, search_task, deadline: float | None) -> tuple[tuple, str, str]:
+    """Run :data:`AUTO_STAGES` in turn: (actions, planner that found them, why that one)."""
+    n_ops = len(search_task.task.operators)
+    passed: list[str] = []
+    for stage in AUTO_STAGES:
+        limit = stage.max_evaluations(n_ops)
+        t0 = time.perf_counter()
+        try:
+            actions = _search(problem, search_task, stage.planner, deadline, limit)
+        except _BudgetUp:
+            passed.append(
+                f"{stage.planner} stopped at its budget of {limit} evaluations "
+                f"({time.perf_counter() - t0:.1f} s)"
+            )
+            continue
+        if not passed:
+            why = f"{stage.planner} finished within its budget of {limit} evaluations"
+        else:
+            why = "; ".join(passed) + f"; {stage.planner} found the plan"
+        return actions, stage.planner, why
+    raise AssertionError("the last stage of AUTO_STAGES has no budget")
 
 
 def solve_problem(
@@ -208,7 +352,9 @@ def solve_problem(
 
     Raises :class:`NoPlanError` when no plan exists (with a diagnosis) or when
     the time limit is reached (said differently), :class:`InputError` for an
-    unknown planner, a bad time limit or a missing Fast Downward.
+    unknown planner, a bad time limit or a missing Fast Downward. With
+    ``auto`` the plan's ``planner`` is the stage that produced it, and its
+    ``selection`` says why.
     """
     info = planner_info(planner)
     if time_limit is not None and not time_limit > 0:
@@ -216,23 +362,11 @@ def solve_problem(
     if not problem.has_goal:
         raise InputError(f"problem '{problem.name}' has no (:goal ...): nothing to plan for")
 
+    used, selection = planner, ""
     if info.backend == "fast-downward":
-        result = fast_downward.run(problem, _FD_ALIASES[planner], planner, time_limit)
-        if result.status == "limit":
-            raise NoPlanError(_gave_up_message(problem, planner, time_limit or 0, "at the limit"))
-        if result.status == "memory":
-            raise NoPlanError(
-                f"no plan found for problem '{problem.name}': planner {planner} ran out of "
-                "memory; this does not prove that no plan exists (try --planner fd-lama-first)"
-            )
-        if result.status == "incomplete":
-            raise NoPlanError(
-                f"no plan found for problem '{problem.name}': planner {planner} ran out of "
-                "states to explore, but its search is incomplete, so this proves nothing"
-            )
-        if result.status == "unsolvable":
-            raise NoPlanError(_no_plan_message(problem, f"{planner} proved it unsolvable"))
-        actions, elapsed = result.actions, result.time_s
+        t0 = time.perf_counter()
+        actions = _fast_downward(problem, planner, time_limit)
+        elapsed = time.perf_counter() - t0
     else:
         t0 = time.perf_counter()
         deadline = None if time_limit is None else t0 + time_limit
@@ -242,31 +376,30 @@ def solve_problem(
                 _no_plan_message(problem, "proved before search, by the delete relaxation")
             )
         try:
-            with _quiet_pyperplan():
-                ops, evaluations = _pyperplan_search(planner, search_task.task, deadline)
+            if planner == "auto":
+                actions, used, selection = _auto(problem, search_task, deadline)
+            else:
+                actions = _search(problem, search_task, planner, deadline)
         except _TimeUp:
             raise NoPlanError(
                 _gave_up_message(problem, planner, time_limit or 0, "at the limit")
             ) from None
-        except MemoryError:
-            raise NoPlanError(
-                f"no plan found for problem '{problem.name}': planner {planner} ran out of "
-                "memory; this does not prove that no plan exists (try --planner gbfs-ff)"
-            ) from None
         elapsed = time.perf_counter() - t0
-        if ops is None:
-            raise NoPlanError(
-                _no_plan_message(
-                    problem,
-                    f"{planner} searched every reachable state ({evaluations} evaluated)",
-                )
-            )
-        actions = tuple(search_task.actions[op.name] for op in ops)
 
-    plan = Plan(actions, planner, info.search, info.heuristic, elapsed, info.optimal)
+    used_info = PLANNERS[used]
+    plan = Plan(
+        tuple(actions),
+        used,
+        used_info.search,
+        used_info.heuristic,
+        elapsed,
+        used_info.optimal,
+        requested=planner,
+        selection=selection,
+    )
     check = validate_plan(problem, plan.actions)
     if not check.ok:  # a planner bug, not a user error: say so plainly
-        raise CakeDrakeError(f"planner {planner} returned an invalid plan: {check.message}")
+        raise CakeDrakeError(f"planner {used} returned an invalid plan: {check.message}")
     return plan
 
 

@@ -2,7 +2,8 @@
 
 ``plan.txt`` holds one ``(action args)`` per line, then ``; cost = N (unit cost)``
 (as Fast Downward's ``sas_plan``) and ``;`` comment lines naming the planner,
-search, heuristic, whether the plan is optimal, and the time. The reader also
+search, heuristic, whether the plan is optimal, the time, and (for a portfolio
+such as ``auto``) which planner was asked for and why this one answered. The reader also
 accepts pyperplan's ``.soln`` (actions only) and ``sas_plan``.
 """
 
@@ -24,7 +25,10 @@ class Plan:
 
     ``time_s`` is the planner's wall-clock time (grounding and search for
     pyperplan; the whole subprocess for Fast Downward). ``optimal`` is True
-    when the planner guarantees no shorter plan exists.
+    when the planner guarantees no shorter plan exists. ``planner`` is the
+    planner that produced the plan; ``requested`` the one asked for (``auto``
+    for the portfolio; empty or equal to ``planner`` otherwise) and
+    ``selection`` why the portfolio's answer came from ``planner``.
     """
 
     actions: tuple[GroundAction, ...]
@@ -33,18 +37,29 @@ class Plan:
     heuristic: str
     time_s: float
     optimal: bool = False
+    requested: str = ""
+    selection: str = ""
+
+    @property
+    def portfolio(self) -> bool:
+        """True when a portfolio (``auto``) chose the planner that produced this plan."""
+        return bool(self.requested) and self.requested != self.planner
 
     @property
     def length(self) -> int:
         return len(self.actions)
 
     def note(self) -> str:
-        """One line: ``planner X: search Y, heuristic Z, N actions (optimal), T ms``."""
+        """One line: ``planner X: search Y, heuristic Z, N actions (optimal), T ms``,
+        then ``; chosen by auto: <why>`` when a portfolio chose X."""
         kind = "optimal" if self.optimal else "satisficing"
-        return (
+        note = (
             f"planner {self.planner}: search {self.search}, heuristic {self.heuristic}, "
             f"{self.length} actions ({kind}), {self.time_s * 1000:.0f} ms"
         )
+        if self.portfolio:
+            note += f"; chosen by {self.requested}: {self.selection}"
+        return note
 
 
 def format_plan(plan: Plan) -> str:
@@ -58,6 +73,8 @@ def format_plan(plan: Plan) -> str:
     lines.append(f"; search: {plan.search}")
     lines.append(f"; heuristic: {plan.heuristic}")
     lines.append(f"; time: {plan.time_s * 1000:.1f} ms")
+    if plan.portfolio:
+        lines.append(f"; chosen by: {plan.requested} ({plan.selection})")
     return "\n".join(lines) + "\n"
 
 

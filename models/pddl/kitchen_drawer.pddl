@@ -1,24 +1,34 @@
-; Task "put an item in a drawer": put the chips (left on the table) away in the top
-; drawer and close it. With one arm the drawer can only be opened with a free hand.
+; Task "put an item in a drawer" (a teaching case of our own): the rice chips, left on
+; the table of SayCan's kitchen, go into the top drawer, and the drawer is closed again.
+; One arm: a drawer can only be opened or closed with a free hand.
 (define (problem kitchen-drawer)
   (:domain kitchen)
   (:objects
-    far-counter near-counter table trash-area - location
-    coke-can sprite-can water-bottle apple chips energy-bar granola-bar sponge - item
-    top-drawer bottom-drawer trash-can - container)
+    close-counter far-counter table trash-area bowl-area sink-area - location
+    seven-up apple tea multigrain-chips kettle-chips jalapeno-chips rice-chips coke
+    grapefruit-soda pepsi redbull energy-bar lime-soda sponge water-bottle - item
+    trash-can bowl sink top-drawer bottom-drawer - container)
   (:init
-    (at-location robot near-counter)
+    (at-location robot close-counter)
     (hand-empty)
-    ; the chips were left on the table; the rest as usual
-    (at-location coke-can far-counter) (at-location sprite-can far-counter)
-    (at-location water-bottle far-counter) (at-location apple far-counter)
-    (at-location chips table) (at-location sponge near-counter)
-    (at-location energy-bar table)
-    ; two drawers under the near counter, both closed; a granola bar in the top one
-    (container-at top-drawer near-counter) (openable top-drawer) (is-closed top-drawer)
-    (container-at bottom-drawer near-counter) (openable bottom-drawer) (is-closed bottom-drawer)
-    (contains top-drawer granola-bar)
-    ; an open trash can with no lid
+    ; drinks on the far counter (but the grapefruit soda)
+    (at-location seven-up far-counter) (at-location coke far-counter)
+    (at-location pepsi far-counter)
+    (at-location redbull far-counter) (at-location lime-soda far-counter)
+    (at-location tea far-counter) (at-location water-bottle far-counter)
+    ; chips and the sponge on the close counter, fruit and the energy bar on the table
+    (at-location multigrain-chips close-counter) (at-location kettle-chips close-counter)
+    (at-location jalapeno-chips close-counter)
+    (at-location rice-chips table)  ; left on the table
+    (at-location sponge close-counter)
+    (at-location apple table) (at-location energy-bar table)
+    (at-location grapefruit-soda table)  ; SayCan's example moves it "from the table"
+    ; containers without lids, each at its own place (SayCan treats them as locations)
     (container-at trash-can trash-area) (is-open trash-can)
+    (container-at bowl bowl-area) (is-open bowl)
+    (container-at sink sink-area) (is-open sink)
+    ; two drawers under the close counter, both closed
+    (container-at top-drawer close-counter) (openable top-drawer) (is-closed top-drawer)
+    (container-at bottom-drawer close-counter) (openable bottom-drawer) (is-closed bottom-drawer)
     (can-wipe sponge))
-  (:goal (and (contains top-drawer chips) (is-closed top-drawer))))
+  (:goal (and (contains top-drawer rice-chips) (is-closed top-drawer))))
