@@ -24,6 +24,7 @@ from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
 from cake_drake.plugins import resolve
 from cake_drake.scenario import Recorded, Scenario, resolve_path
 from cake_drake.symbolic import (
+    DEFAULT_PLANNER,
     PLANNERS,
     PROBLEM_5_OPTIMAL_LENGTH,
     GroundAction,
@@ -157,7 +158,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     layout(towers(problem.init), s.world.slots)
     planner = None
     if task.plan:
-        if task.planner != "astar-lmcut":
+        if task.planner != DEFAULT_PLANNER:
             raise InputError(
                 f"task.plan and task.planner ({task.planner}) both given: a plan file is "
                 "executed as it is, not planned; drop one"

@@ -40,10 +40,10 @@ from cake_drake.dynamic.controllers import (
 from cake_drake.errors import InputError
 from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
+from cake_drake.symbolic import DEFAULT_PLANNER
 from cake_drake.world.scene import WorldConfig
 
 PACKAGE = "package://cake_drake/"
-DEFAULT_PLANNER = "astar-lmcut"
 
 
 @dataclass
