@@ -387,3 +387,31 @@ def random_problem(
     name = f"random-{n_blocks}-blocks-seed-{seed}"
     name += "-tall" * tall + "-partial" * partial
     return problem_text(name, init, goal, n)
+
+
+def suite_problems(
+    sizes: Iterable[int] = range(3, 13), seeds: Iterable[int] = (0, 1, 2)
+) -> list[tuple[str, Naming, str]]:
+    """The benchmark suite: ``(name, naming, PDDL text)`` for every size and seed.
+
+    Seed 0 is the exercise's naming with random towers and a complete goal;
+    seed 1 the IPC naming with tall towers (start up to 10 high, goal up to 9)
+    and a partial goal; seed 2 the typed naming with random towers capped at
+    10 and 9 and a partial goal; further seeds cycle through the three.
+    """
+    out = []
+    for n in sizes:
+        for seed in seeds:
+            kind = seed % 3
+            style = NAMINGS[("exercise", "ipc", "typed")[kind]]
+            text = random_problem(
+                n,
+                seed,
+                style,
+                tall=kind == 1,
+                max_height=10,
+                goal_max_height=9,
+                partial=kind > 0,
+            )
+            out.append((f"{style.name}-{n}-{seed}", style, text))
+    return out
