@@ -4,10 +4,17 @@ from __future__ import annotations
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
-from cake_drake.symbolic import BLOCKSWORLD_DOMAIN, PROBLEM_5, random_problem, read_plan
+from cake_drake.symbolic import (
+    BLOCKSWORLD_DOMAIN,
+    PROBLEM_5,
+    VARIANTS_DIR,
+    random_problem,
+    read_plan,
+)
 
 D, P = str(BLOCKSWORLD_DOMAIN), str(PROBLEM_5)
 PROBLEM_TEXT = PROBLEM_5.read_text()
@@ -69,6 +76,28 @@ def test_generated_problem(tmp_path):
     assert r.returncode == 0, r.stderr
     assert "(satisficing)" in r.stdout and "--planner astar-lmcut finds the shortest" in r.stdout
     assert "chosen by" not in r.stdout  # gbfs-ff was asked for: no portfolio
+
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.mark.parametrize(
+    "domain, problem, first",
+    [
+        ("blocksworld-ipc.pddl", "ipc_blocks_4_0.pddl", "(pickup b)"),
+        ("blocksworld-ipc.pddl", "ipc_tall_12.pddl", "(unstack b10 b9)"),
+        ("blocksworld-typed.pddl", "typed_5.pddl", "(unstack a b)"),
+        ("blocksworld-renamed.pddl", "renamed_5.pddl", "(lift-off b a)"),
+    ],
+)
+def test_variant_domains_plan_under_auto(tmp_path, domain, problem, first):
+    out = tmp_path / "plan.txt"
+    r = plan_cli(str(VARIANTS_DIR / domain), str(DATA / problem), "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[0] == first
+    assert "; chosen by auto: astar-lmcut finished within its budget (" in r.stdout
+    text = out.read_text()
+    assert "(optimal: no shorter plan exists)" in text and "; chosen by: auto (" in text
 
 
 def test_time_limit_exit_1_and_says_gave_up(tmp_path):

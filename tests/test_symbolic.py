@@ -135,7 +135,7 @@ def test_default_auto_gets_the_optimal_10_and_says_who_found_it():
     assert plan.requested == "auto" and plan.planner == "astar-lmcut"
     assert plan.optimal and plan.length == PROBLEM_5_OPTIMAL_LENGTH
     assert plan.note().endswith(
-        "; chosen by auto: astar-lmcut finished within its budget of 4303 evaluations"
+        "; chosen by auto: astar-lmcut finished within its budget (59 evaluations)"
     )
     text = format_plan(plan)
     assert "; planner: astar-lmcut (optimal: no shorter plan exists)" in text
@@ -205,6 +205,50 @@ def test_diagnose_names_relaxed_unreachable_goals(domain, problem5):
     broken = parse_problem(domain, problem5.text.replace("(clear a) (clear d)", "(clear a)"))
     assert "goal (on c d) is unreachable even with delete effects ignored" in diagnose(broken)
     assert diagnose(problem5) == []
+
+
+def test_auto_falls_back_when_astar_reaches_its_budget(monkeypatch, problem5):
+    from cake_drake.symbolic import planners
+
+    small = (planners.Stage("astar-lmcut", 500.0), *planners.AUTO_STAGES[1:])
+    monkeypatch.setattr(planners, "AUTO_STAGES", small)
+    plan = solve_problem(problem5)
+    assert plan.planner == "wastar-ff" and plan.requested == "auto" and not plan.optimal
+    assert plan.selection.startswith("astar-lmcut stopped at its budget after ")
+    assert plan.selection.endswith("; wastar-ff found the plan")
+    assert validate_plan(problem5, plan.actions).ok
+    text = format_plan(plan)
+    assert "; planner: wastar-ff (satisficing: a shorter plan may exist)" in text
+    assert "; chosen by: auto (astar-lmcut stopped at its budget after " in text
+
+    last = (planners.Stage("astar-lmcut", 500.0), planners.Stage("wastar-ff", 500.0))
+    monkeypatch.setattr(planners, "AUTO_STAGES", (*last, planners.Stage("gbfs-ff", None)))
+    plan = solve_problem(problem5)
+    assert plan.planner == "gbfs-ff" and plan.length == 14
+    assert "wastar-ff stopped at its budget after " in plan.selection
+
+
+def test_auto_is_deterministic_and_proves_unsolvable(domain, problem5):
+    """Budgets count work, not seconds: the same problem gets the same plan."""
+    p = parse_problem(domain, random_problem(9, 3))
+    first, second = solve_problem(p), solve_problem(p)
+    assert first.actions == second.actions and first.planner == second.planner
+    broken = parse_problem(domain, problem5.text.replace("(clear a) (clear d)", "(clear a)"))
+    with pytest.raises(NoPlanError, match="no plan exists .* diagnosis: initial state: d has"):
+        solve_problem(broken)
+
+
+def test_auto_respects_the_time_limit(domain):
+    p = parse_problem(domain, random_problem(14, 1))
+    with pytest.raises(NoPlanError, match="planner auto gave up at the limit"):
+        solve_problem(p, "auto", time_limit=0.05)
+
+
+def test_wastar_ff_is_satisficing_and_valid(domain):
+    for seed in range(3):
+        p = parse_problem(domain, random_problem(7, seed))
+        plan = solve_problem(p, "wastar-ff")
+        assert not plan.optimal and validate_plan(p, plan.actions).ok
 
 
 def test_gbfs_falls_back_to_complete_search(domain):

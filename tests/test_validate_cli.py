@@ -108,3 +108,19 @@ def test_bad_inputs_exit_2(args, expected):
     r = validate(*args)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.count("\n") == 1 and expected in r.stderr
+
+
+def test_ipc_naming_plan(tmp_path):
+    """A plan in the IPC naming for the IPC domain; the exercise's names are not its actions."""
+    from cake_drake.symbolic import VARIANTS_DIR
+
+    domain = str(VARIANTS_DIR / "blocksworld-ipc.pddl")
+    text = PROBLEM_5.read_text().replace("on-table", "ontable").replace("arm-empty", "handempty")
+    problem = write(tmp_path, text.replace("(:domain blocksworld)", "(:domain blocks)"), "p.pddl")
+    ipc_plan = OPTIMAL.replace("pick-up", "pickup").replace("put-down", "putdown")
+    r = validate(domain, problem, write(tmp_path, ipc_plan))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "valid: 10 steps reach the goal" in r.stdout
+    r = validate(domain, problem, write(tmp_path, OPTIMAL))
+    assert r.returncode == 1
+    assert "step 2 of 10: (put-down a): no action 'put-down' in domain 'blocks'" in r.stdout

@@ -20,6 +20,7 @@ from cake_drake.symbolic.blocksworld import (
     is_blocksworld,
     problem_text,
     random_problem,
+    suite_problems,
     tower_facts,
     towers,
 )
@@ -135,6 +136,7 @@ __all__ = [
     "read_plan",
     "solve",
     "solve_problem",
+    "suite_problems",
     "tower_facts",
     "towers",
     "validate_plan",

@@ -21,7 +21,7 @@ from pathlib import Path
 from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError
 from cake_drake.symbolic.pddl import Domain, Fact
-from cake_drake.symbolic.roles import CANONICAL, Vocabulary
+from cake_drake.symbolic.roles import CANONICAL, Vocabulary, block_key
 from cake_drake.symbolic.roles import is_blocksworld as _is_blocksworld
 
 #: The canonical predicates (with arities), the names the world and geometry use.
@@ -170,7 +170,8 @@ def check_goal(goal: Iterable[Fact], vocabulary: Vocabulary = CANONICAL) -> list
 def towers(facts: Iterable[Fact], vocabulary: Vocabulary = CANONICAL) -> list[list[str]]:
     """The towers described by ``on`` / ``on-table`` facts, each listed bottom to top.
 
-    Towers are ordered by the name of their bottom block. Other facts are
+    Towers are ordered by the name of their bottom block (``b2`` before
+    ``b10``). Other facts are
     ignored (a held block is in no tower). Raises :class:`InputError` when the
     facts are not a set of towers (two supports, two blocks on one, a loop, a
     block resting on nothing).
@@ -182,7 +183,7 @@ def towers(facts: Iterable[Fact], vocabulary: Vocabulary = CANONICAL) -> list[li
         raise InputError("the facts are not a set of towers: " + "; ".join(problems))
     result = []
     placed = set()
-    for bottom in sorted(table):
+    for bottom in sorted(table, key=block_key):
         tower = [bottom]
         while tower[-1] in under:
             tower.append(under[tower[-1]][0])
@@ -286,7 +287,7 @@ def problem_text(
     """
     n = naming(style)
     v = n.vocabulary
-    blocks = sorted({b for t in init_towers for b in t}, key=_block_key)
+    blocks = sorted({b for t in init_towers for b in t}, key=block_key)
     rename = {getattr(CANONICAL, r): getattr(v, r) for r in v.as_dict()}
 
     def fmt(facts: Iterable[Fact]) -> str:
@@ -301,12 +302,6 @@ def problem_text(
         f"  (:init {fmt(init)} ({v.hand_empty}))\n"
         f"  (:goal (and {fmt(goal)})))\n"
     )
-
-
-def _block_key(name: str):
-    """b2 before b10; a, b, c alphabetically."""
-    digits = name.lstrip(string.ascii_letters)
-    return (name[: len(name) - len(digits)], int(digits) if digits.isdigit() else -1, name)
 
 
 def blocks_problem(
@@ -392,3 +387,31 @@ def random_problem(
     name = f"random-{n_blocks}-blocks-seed-{seed}"
     name += "-tall" * tall + "-partial" * partial
     return problem_text(name, init, goal, n)
+
+
+def suite_problems(
+    sizes: Iterable[int] = range(3, 13), seeds: Iterable[int] = (0, 1, 2)
+) -> list[tuple[str, Naming, str]]:
+    """The benchmark suite: ``(name, naming, PDDL text)`` for every size and seed.
+
+    Seed 0 is the exercise's naming with random towers and a complete goal;
+    seed 1 the IPC naming with tall towers (start up to 10 high, goal up to 9)
+    and a partial goal; seed 2 the typed naming with random towers capped at
+    10 and 9 and a partial goal; further seeds cycle through the three.
+    """
+    out = []
+    for n in sizes:
+        for seed in seeds:
+            kind = seed % 3
+            style = NAMINGS[("exercise", "ipc", "typed")[kind]]
+            text = random_problem(
+                n,
+                seed,
+                style,
+                tall=kind == 1,
+                max_height=10,
+                goal_max_height=9,
+                partial=kind > 0,
+            )
+            out.append((f"{style.name}-{n}-{seed}", style, text))
+    return out

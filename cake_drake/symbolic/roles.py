@@ -204,13 +204,23 @@ class BlocksworldRoles:
         raise InputError(f"domain '{self.domain}' has no action that does '{what}'")
 
     def blocks(self, problem: Problem) -> list[str]:
-        """The problem's blocks: its objects (and constants) of a block parameter's type."""
+        """The problem's blocks: its objects (and constants) of a block parameter's type,
+        in natural order (``b2`` before ``b10``)."""
         d = problem.domain
         return sorted(
-            o
-            for o, t in problem.object_types.items()
-            if any(d.is_subtype(t, bt) for bt in self.block_types)
+            (
+                o
+                for o, t in problem.object_types.items()
+                if any(d.is_subtype(t, bt) for bt in self.block_types)
+            ),
+            key=block_key,
         )
+
+
+def block_key(name: str) -> tuple:
+    """Sort key that puts ``b2`` before ``b10`` (and ``a``, ``b``, ``c`` in order)."""
+    digits = name[len(name.rstrip("0123456789")) :]
+    return (name[: len(name) - len(digits)], int(digits) if digits else -1, name)
 
 
 # --------------------------------------------------------------------------- reading
@@ -257,10 +267,18 @@ def _read_vocabulary(domain: Domain) -> Vocabulary:
             )
     by_arity = {n: [p for p, (_, k) in fluents.items() if k == n] for n in (0, 1, 2)}
 
+    if not by_arity[0]:
+        movers = [a.name for a in actions if any(len(f) == 3 for f in (*a.add, *a.delete))]
+        lead = (
+            f"action '{movers[0]}' moves a block in one step, never holding it; " if movers else ""
+        )
+        _fail(
+            f"{lead}no action changes a 0-ary 'hand empty' predicate such as (handempty), "
+            "so nothing picks a block up and puts it down"
+        )
     hand_empty = _only(
         by_arity[0],
-        "no action changes a 0-ary 'hand empty' predicate such as (handempty): without one "
-        "the arm could hold two blocks at once",
+        "",
         "the actions change the 0-ary predicates {}; a Blocksworld domain has one, 'hand empty'",
     )
     grasp = [a for a in actions if (hand_empty,) in a.delete]
@@ -294,30 +312,46 @@ def _read_vocabulary(domain: Domain) -> Vocabulary:
         "no action changes a two-argument 'on' predicate: nothing stacks a block on another",
         "the actions change the two-argument predicates {}; a Blocksworld domain has one, 'on'",
     )
-    clear_candidates = unary - {holding}
     stacking = [a for a in actions if any(f[0] == on for f in (*a.add, *a.delete))]
+    clear_candidates = set()  # deleted for ?y by stacking on ?y, added for ?y by unstacking
     for a in stacking:
         for f in a.add:
             if f[0] == on:
-                clear_candidates &= {g[0] for g in a.delete if g[1:] == f[2:]}
+                clear_candidates |= {g[0] for g in a.delete if g[1:] == f[2:]}
         for f in a.delete:
             if f[0] == on:
-                clear_candidates &= {g[0] for g in a.add if g[1:] == f[2:]}
+                clear_candidates |= {g[0] for g in a.add if g[1:] == f[2:]}
+    clear_candidates &= unary - {holding}
     clear = _only(
         clear_candidates,
         f"no one-argument 'clear' predicate: none is deleted for ?y where ({on} ?x ?y) is "
-        f"added and added for ?y where ({on} ?x ?y) is deleted (in "
+        f"added or added for ?y where ({on} ?x ?y) is deleted (in "
         f"{', '.join(a.name for a in stacking)})",
         "cannot tell which of {} means 'clear'",
     )
+
+    def about_held(a: ActionSchema, facts, held_facts) -> set[str]:
+        held_args = {f[1:] for f in held_facts if f[0] == holding}
+        return {f[0] for f in facts if len(f) == 2 and f[1:] in held_args}
+
+    # added for ?x by an action that releases ?x, deleted for ?x by one that grasps ?x
+    put = set().union(*(about_held(a, a.add, a.delete) for a in actions))
+    taken = set().union(*(about_held(a, a.delete, a.add) for a in actions))
+    table_candidates = (put & taken) - {holding, clear}
     on_table = _only(
-        unary - {holding, clear},
-        f"no one-argument 'on the table' predicate changes besides '{holding}' and '{clear}': "
-        "no action picks a block from the table or puts one down",
-        "the one-argument predicates {} all change, but a Blocksworld domain has one "
-        f"besides '{holding}' and '{clear}' ('on the table'): the others do something "
-        "the robot cannot",
+        table_candidates,
+        f"no one-argument 'on the table' predicate: none besides '{clear}' is added for ?x "
+        f"by an action that deletes ({holding} ?x) and deleted by one that adds it",
+        "cannot tell which of {} means 'on the table'",
     )
+    roles = {on, on_table, clear, holding, hand_empty}
+    for p, (a, _) in fluents.items():
+        if p not in roles:
+            _fail(
+                f"action '{a}' changes '{p}', which means none of on, on the table, clear, "
+                f"holding, hand empty (here '{on}', '{on_table}', '{clear}', '{holding}', "
+                f"'{hand_empty}'): the robot cannot do that"
+            )
     return Vocabulary(on, on_table, clear, holding, hand_empty)
 
 
