@@ -21,63 +21,10 @@ a goal, every step executes); 1 it maps but fails (no schema, ambiguous, a
 precondition fails, or the goal is not reached); 2 unreadable input.
 """
 
-from __future__ import annotations
-
-import argparse
 import sys
-from pathlib import Path
 
-from cake_drake.errors import EXIT_NO_PLAN, EXIT_OK, CliParser, run_cli
-from cake_drake.language import (
-    KITCHEN_DEFAULT,
-    KITCHEN_DOMAIN,
-    analyse,
-    load_transcript,
-    render_text,
-    write_outputs,
-)
-from cake_drake.symbolic import DEFAULT_PLANNER, load_problem, planner_info
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = CliParser(
-        prog="python -m cake_drake.saycan",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.add_argument("transcript", metavar="TRANSCRIPT", help="transcript text file")
-    parser.add_argument(
-        "--domain", default=str(KITCHEN_DOMAIN), help="PDDL domain (default: kitchen.pddl)"
-    )
-    parser.add_argument(
-        "--problem",
-        default=str(KITCHEN_DEFAULT),
-        help="PDDL problem (default: kitchen_default.pddl, SayCan's kitchen, no goal)",
-    )
-    parser.add_argument(
-        "--out", type=Path, help="output folder (default: outputs/saycan/<transcript name>)"
-    )
-    parser.add_argument(
-        "--planner", default=DEFAULT_PLANNER, help=f"planner for the comparison ({DEFAULT_PLANNER})"
-    )
-    parser.add_argument(
-        "--time-limit", type=float, default=30.0, metavar="S", help="planner time limit (30 s)"
-    )
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    planner_info(args.planner)
-    transcript = load_transcript(args.transcript)
-    problem = load_problem(args.domain, args.problem, require_goal=False)
-    analysis = analyse(transcript, problem, args.planner, args.time_limit)
-    print(render_text(analysis), end="")
-    out = args.out or Path("outputs") / "saycan" / Path(args.transcript).stem
-    write_outputs(analysis, out)
-    print(f"wrote {out}/plan.txt, problem.pddl, report.md")
-    return EXIT_OK if analysis.ok else EXIT_NO_PLAN
-
+from cake_drake.cli import main_saycan
+from cake_drake.errors import run_cli
 
 if __name__ == "__main__":
-    sys.exit(run_cli(main))
+    sys.exit(run_cli(main_saycan))
