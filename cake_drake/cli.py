@@ -26,7 +26,6 @@ from cake_drake.errors import (  # noqa: E402
     EXIT_EXECUTION_FAILED,
     EXIT_NO_PLAN,
     EXIT_OK,
-    CliParser,
     InputError,
     run_cli,
 )
@@ -44,6 +43,14 @@ from cake_drake.symbolic import (  # noqa: E402
     validate_plan,
     write_plan,
 )
+
+
+class CliParser(argparse.ArgumentParser):
+    """argparse, but a usage error is one :class:`InputError` line (exit 2), not usage text."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise InputError(f"{self.prog}: {message} (see --help)")
+
 
 RUN_DOC = """Run the whole cake: plan a Blocksworld problem, execute it on a simulated Panda.
 

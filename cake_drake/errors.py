@@ -7,7 +7,6 @@ stderr and the exit code stored on the class.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from collections.abc import Callable
@@ -49,13 +48,6 @@ class ExecutionError(CakeDrakeError):
 
 class IkError(ExecutionError):
     """Inverse kinematics found no joint configuration for a named waypoint."""
-
-
-class CliParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one :class:`InputError` line (exit 2), not usage text."""
-
-    def error(self, message: str):  # type: ignore[override]
-        raise InputError(f"{self.prog}: {message} (see --help)")
 
 
 def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = None) -> int:

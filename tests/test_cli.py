@@ -1,0 +1,44 @@
+"""The one CLI module: the cake-drake console script and its subcommands."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cake_drake.cli import COMMANDS, main
+
+
+def test_help_lists_every_command(capsys):
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for name in ("run", "gains", "world", "plan", "validate", "saycan"):
+        assert name in out and name in COMMANDS
+
+
+def test_an_unknown_command_is_one_line_and_exit_2(capsys):
+    assert main(["fly"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "plan" in err
+
+
+def test_the_library_never_imports_the_cli():
+    root = Path(__file__).resolve().parent.parent / "cake_drake"
+    thin = {"run.py", "plan.py", "validate.py", "saycan.py", "gains.py", "cli.py", "__main__.py"}
+    offenders = [
+        str(p.relative_to(root))
+        for p in root.rglob("*.py")
+        if p.name not in thin and ("cake_drake.cli" in p.read_text() or "argparse" in p.read_text())
+    ]
+    assert not offenders, offenders
+
+
+def test_the_console_script_runs_a_subcommand():
+    script = Path(sys.executable).parent / "cake-drake"
+    if not script.exists():
+        pytest.skip("the package is not installed in this interpreter's environment")
+    r = subprocess.run([str(script), "plan"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "10 actions" in r.stdout
