@@ -34,6 +34,7 @@ from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import TimedSolver
 from cake_drake.scenario import Recorded, Scenario, resolve_path
 from cake_drake.symbolic import GroundAction, Problem
+from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
 from cake_drake.systems import make_action_source
 from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
 from cake_drake.world.scene import Q_HOME, X_HAND_GRASP, Scene, add_world, make_control_plant
@@ -112,7 +113,14 @@ def _add_reference(
         X_hand_grasp=X_HAND_GRASP,
         slots=scenario.world.slots,
     )
-    settings = MotionSettings(motion.timing, motion.waypoints, checker, motion.avoid_collisions)
+    roles = blocksworld_roles(problem.domain)
+    settings = MotionSettings(
+        motion.timing,
+        motion.waypoints,
+        checker,
+        motion.avoid_collisions,
+        meaning=lambda action: roles.classify(action).canonical(),
+    )
     waypoint_ik = builder.AddNamedSystem(
         "waypoint_ik",
         WaypointIk(
@@ -147,7 +155,7 @@ def build_diagram(
     ``meshcat`` (a ``pydrake.geometry.Meshcat``) adds a visualizer; never needed headless.
     """
     controller = make_controller(scenario.controller)
-    blocks = sorted(problem.objects)
+    blocks = list(blocksworld_view(problem).blocks)
     builder = DiagramBuilder()
     scene = add_world(
         builder, blocks, scenario.world, controller.arm_pd_gains(), initial_poses=initial_poses

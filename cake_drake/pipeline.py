@@ -32,13 +32,13 @@ from cake_drake.symbolic import (
     Problem,
     check_state,
     fact_str,
-    is_blocksworld,
     load_problem,
     read_plan,
     solve_problem,
     towers,
     validate_plan,
 )
+from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.scene import layout
 
 #: A planner: ``(problem, time_limit) -> Plan`` (or a sequence of ground actions).
@@ -117,16 +117,20 @@ def _check_numbers(s: Scenario) -> None:
 
 
 def load_world_problem(domain: Path, problem_path: Path) -> Problem:
-    """A Blocksworld problem whose initial state the world can lay out."""
+    """A Blocksworld problem (any naming: its domain is read by structure) whose initial
+    state the world can lay out; refused with one line (exit 2) otherwise."""
     problem = load_problem(domain, problem_path)
-    if not is_blocksworld(problem.domain):
-        raise InputError(
-            f"{domain}: the simulated world runs Blocksworld (predicates on, on-table, clear, "
-            "holding, arm-empty; actions pick-up, put-down, stack, unstack)"
-        )
-    issues = check_state(problem.init, problem.objects)
+    view = blocksworld_view(problem)  # refuses a domain the robot cannot execute
+    issues = check_state(problem.init, view.blocks, vocabulary=view.roles.vocabulary)
     if issues:
         raise InputError(f"{problem_path}: the initial state cannot be laid out: {issues[0]}")
+    held = [f for f in view.init if f[0] == "holding"]
+    if held:
+        raise InputError(
+            f"{problem_path}: the initial state has a block in the hand "
+            f"({fact_str(next(iter(view.roles.from_canonical(held))))}); the world starts "
+            "with every block on the table or on another block"
+        )
     return problem
 
 
@@ -155,7 +159,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     make_controller(s.controller)
     task = s.task
     problem = load_world_problem(resolve_path(task.domain), resolve_path(task.problem))
-    layout(towers(problem.init), s.world.slots)
+    layout(towers(blocksworld_view(problem).init), s.world.slots)
     planner = None
     if task.plan:
         if task.planner != DEFAULT_PLANNER:
@@ -212,15 +216,21 @@ def get_plan(checked: Checked) -> Plan:
 
 
 def verdict(problem: Problem, execution: Execution) -> tuple[bool, list[str], str]:
-    """(success, unmet goal facts, one-line message), from the measured poses."""
+    """(success, unmet goal facts, one-line message), from the measured poses.
+
+    The world reads facts back in the canonical names; the goal is compared in them and
+    unmet facts are named in the domain's own vocabulary.
+    """
     if execution.error is not None:
         return False, [], execution.error
     facts = execution.reading.facts
-    unmet = [fact_str(f) for f in sorted(problem.goal - facts)]
+    view = blocksworld_view(problem)
+    missing = view.goal - facts
+    unmet = [fact_str(f) for f in sorted(view.roles.from_canonical(missing))]
     loose = [
         f"{b} stands {off * 1000:.1f} mm off the cube below (tolerance {STACK_TOL * 1000:.0f} mm)"
         for b, off in sorted(execution.offsets.items())
-        if off > STACK_TOL and any(g[0] == "on" and g[1] == b for g in problem.goal)
+        if off > STACK_TOL and any(g[0] == "on" and g[1] == b for g in view.goal)
     ]
     if unmet or loose:
         parts = []
@@ -261,8 +271,9 @@ def run(
         stages["import"] = t - started
     checked = check(scenario, write)
     problem = checked.problem
-    blocks = sorted(problem.objects)
-    initial = layout(towers(problem.init), scenario.world.slots)
+    view = blocksworld_view(problem)
+    blocks = list(view.blocks)
+    initial = layout(towers(view.init), scenario.world.slots)
     if scenario.visualization.meshcat and meshcat is None:
         from pydrake.geometry import StartMeshcat
 

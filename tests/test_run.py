@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -172,3 +173,59 @@ def test_every_cli_reports_a_bad_command_line_in_one_line(module):
     )
     assert r.returncode == 2
     assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
+
+
+VARIANTS = Path(__file__).resolve().parent.parent / "models" / "pddl" / "variants"
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.mark.parametrize(
+    "domain, problem, tower",
+    [
+        ("blocksworld-ipc.pddl", "ipc_blocks_4_0.pddl", "d on c on b on a"),
+        ("blocksworld-typed.pddl", "typed_5.pddl", "a on b on c on d on e"),
+        ("blocksworld-renamed.pddl", "renamed_5.pddl", "a on b on c on d on e"),
+    ],
+)
+def test_every_blocksworld_naming_runs_end_to_end(domain, problem, tower, tmp_path):
+    r = cli(
+        "--domain", str(VARIANTS / domain), "--problem", str(DATA / problem),
+        "--out", str(tmp_path), "--no-render",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert f"goal reached: {tower}" in r.stdout
+    plan = (tmp_path / "plan.txt").read_text()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["success"] is True
+    if "ipc" in domain:
+        assert "(pickup" in plan or "(unstack" in plan
+
+
+@pytest.mark.parametrize(
+    "domain, problem_text, words",
+    [
+        ("kitchen", None, "not a Blocksworld domain the robot can execute"),
+        (None, "(on-table a) (on-table b) (holding c) (clear a) (clear b)", "in the hand"),
+        (None, "(on-table a) (on b a) (on c a) (clear b) (clear c) (arm-empty)", "a has 2 blocks"),
+    ],
+)
+def test_what_the_world_cannot_run_is_refused_before_simulating(
+    tmp_path, domain, problem_text, words
+):
+    from cake_drake.symbolic import BLOCKSWORLD_DOMAIN, MODELS_DIR
+
+    args = []
+    if domain == "kitchen":
+        args = ["--domain", str(MODELS_DIR / "pddl" / "kitchen.pddl"),
+                "--problem", str(MODELS_DIR / "pddl" / "kitchen_snack.pddl")]  # fmt: skip
+    else:
+        p = tmp_path / "p.pddl"
+        p.write_text(
+            "(define (problem p) (:domain blocksworld) (:objects a b c)\n"
+            f"  (:init {problem_text}) (:goal (and (on a b))))\n"
+        )
+        args = ["--domain", str(BLOCKSWORLD_DOMAIN), "--problem", str(p)]
+    r = cli(*args, "--out", str(tmp_path / "o"))
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
+    assert "simulat" not in r.stderr and not (tmp_path / "o").exists()

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -10,12 +10,13 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
-from cake_drake.errors import ExecutionError
+from cake_drake.errors import CakeDrakeError, ExecutionError
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import IkSolver
 from cake_drake.geometric.solve import solve_action
 from cake_drake.geometric.trajectory import JointLimits, JointTrajectory, Timing
 from cake_drake.geometric.waypoints import PICK_ACTIONS, WaypointParams, WorldView
+from cake_drake.symbolic import GroundAction
 from cake_drake.systems.plan_source import ActionCommand
 
 #: Sizes of the named output ports every reference source has (``WaypointIk`` and the
@@ -39,14 +40,25 @@ class WorldIndices:
     slots: tuple[tuple[float, float], ...]  # table slots (x, y) for put-down
 
 
+def _as_is(action: GroundAction) -> GroundAction:
+    return action
+
+
 @dataclass(frozen=True)
 class MotionSettings:
-    """How ``WaypointIk`` turns waypoints into moves (the scenario's ``motion`` section)."""
+    """How ``WaypointIk`` turns actions into moves (the scenario's ``motion`` section).
+
+    ``meaning`` maps the domain's ground action to the exercise's names (``pick-up``,
+    ``unstack``, ``put-down``, ``stack``): what the action *does*, read from the domain's
+    schemas (:meth:`cake_drake.symbolic.roles.GroundRole.canonical`), so that any
+    Blocksworld naming runs.
+    """
 
     timing: Timing
     waypoints: WaypointParams
     checker: CollisionChecker | None = None  # report moves that sweep through cubes
     avoid_collisions: bool = False
+    meaning: Callable[[GroundAction], GroundAction] = _as_is
 
 
 @dataclass(frozen=True)
@@ -153,11 +165,22 @@ class WaypointIk(LeafSystem):
         traj = prog.trajectory.copy()
         if t > traj.end_time:
             traj.hold(t - traj.end_time, "idle", -1)
-        held = cmd.action.args[0] if cmd.action.name in PICK_ACTIONS else None
         m = self._motion
         try:
+            action = m.meaning(cmd.action)
+        except CakeDrakeError as e:
+            error = f"action {cmd.index + 1} {cmd.action}: {e}"
+            new = replace(prog, error=error)
+            state.get_mutable_abstract_state(self._state_index).set_value(new)
+            return
+        held = action.args[0] if action.name in PICK_ACTIONS else None
+
+        def named(text: str) -> str:  # messages name the domain's own action
+            return text.replace(str(action), str(cmd.action))
+
+        try:
             motion = solve_action(
-                cmd.action,
+                action,
                 cmd.index,
                 self._world(context, prog.held),
                 self._ik,
@@ -167,10 +190,12 @@ class WaypointIk(LeafSystem):
                 m.checker,
                 m.avoid_collisions,
             )
-            warnings = prog.warnings + tuple(motion.warnings(cmd.index, cmd.action))
-            new = replace(prog, trajectory=traj, working=cmd.index, held=held, warnings=warnings)
+            found = tuple(named(w) for w in motion.warnings(cmd.index, action))
+            new = replace(
+                prog, trajectory=traj, working=cmd.index, held=held, warnings=prog.warnings + found
+            )
         except ExecutionError as e:
-            new = replace(prog, working=-1, error=str(e))
+            new = replace(prog, working=-1, error=named(str(e)))
         state.get_mutable_abstract_state(self._state_index).set_value(new)
 
     def _trajectory(self, context) -> JointTrajectory:
