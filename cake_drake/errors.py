@@ -16,6 +16,8 @@ EXIT_OK = 0
 EXIT_NO_PLAN = 1  # no plan (proved or limit reached); an invalid plan; a plan that fails
 EXIT_BAD_INPUT = 2  # unreadable or malformed input, bad options
 EXIT_EXECUTION_FAILED = 3  # the plan could not be executed in the simulated world
+EXIT_OUTPUT_FAILED = 4  # the outputs could not be written (full disk, read-only folder)
+EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM: stopped, nothing half-written left behind
 
 
 class CakeDrakeError(Exception):
@@ -46,22 +48,52 @@ class ExecutionError(CakeDrakeError):
     exit_code = EXIT_EXECUTION_FAILED
 
 
+class OutputError(CakeDrakeError):
+    """The outputs could not be written (a full disk, a read-only folder): none were."""
+
+    exit_code = EXIT_OUTPUT_FAILED
+
+
 class IkError(ExecutionError):
     """Inverse kinematics found no joint configuration for a named waypoint."""
 
 
+def _terminate(signum, frame) -> None:
+    raise KeyboardInterrupt("SIGTERM")
+
+
 def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = None) -> int:
-    """Call ``main`` and turn a :class:`CakeDrakeError` into one line and its exit code."""
+    """Call ``main`` and turn every way it can stop into one line and a documented code.
+
+    :class:`CakeDrakeError` -> its message and exit code; Ctrl-C and SIGTERM ->
+    "interrupted", 130 (the ``finally`` blocks on the way out remove anything staged);
+    an ``OSError`` nothing else caught (a full disk mid-write) -> one line, 4.
+    """
+    import signal
+
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread: leave signals alone
+        previous = None
     try:
         return main(argv)
     except CakeDrakeError as e:
         print(f"error: {e}", file=sys.stderr)
         return e.exit_code
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as e:
+        how = " by SIGTERM" if str(e) == "SIGTERM" else ""
+        print(f"error: interrupted{how}; nothing was written", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_OK
+    except OSError as e:
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"error: {where}{e.strerror or e}; nothing was written", file=sys.stderr)
+        return EXIT_OUTPUT_FAILED
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)

@@ -147,7 +147,9 @@ def execute(
         progress.update(context.get_time(), wall, done, final=True)
     plant_context = cake.scene.plant.GetMyContextFromRoot(context)
     poses = cube_poses(cake.scene, plant_context)
-    reading = read_facts(poses)
+    fingers = float(cake.scene.plant.GetPositions(plant_context, cake.scene.hand)[0])
+    X_WG = cake.scene.grasp_frame.CalcPoseInWorld(plant_context)
+    reading = read_facts(poses, X_WG=X_WG, finger_opening=fingers)
     return Execution(
         sim_s=context.get_time(),
         wall_s=wall,
@@ -160,5 +162,5 @@ def execute(
         logs=_logs(cake, context),
         warnings=warnings,
         q_final=cake.scene.plant.GetPositions(plant_context, cake.scene.arm).copy(),
-        fingers_final=float(cake.scene.plant.GetPositions(plant_context, cake.scene.hand)[0]),
+        fingers_final=fingers,
     )

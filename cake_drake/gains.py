@@ -109,14 +109,10 @@ def study(
 def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
     """Run :func:`study` and write ``kd_comparison.png`` and ``gains.json`` to ``out``."""
     table, results = study(base, kds, out)
-    staged = OutputDir(out)
-    try:
+    with OutputDir(out) as staged:
         comparison_plot(results, staged.path("kd_comparison.png"))
         staged.write_json("gains.json", table)
         staged.commit()
-    except BaseException:
-        staged.discard()
-        raise
     return table
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 from cake_drake.diagram import CakeDiagram, build_diagram
 from cake_drake.errors import InputError, NoPlanError
 from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
+from cake_drake.outputs.files import check_output_folder
 from cake_drake.plugins import resolve
 from cake_drake.scenario import Recorded, Scenario, resolve_path
 from cake_drake.symbolic import (
@@ -132,17 +133,6 @@ def load_world_problem(domain: Path, problem_path: Path) -> Problem:
             "with every block on the table or on another block"
         )
     return problem
-
-
-def check_output_folder(out: Path) -> None:
-    """Refuse an output folder that cannot be one, before any work."""
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out}: exists and is not a folder; choose another output folder")
-    parent = out if out.exists() else next((p for p in out.parents if p.exists()), Path("."))
-    import os
-
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise InputError(f"{out}: cannot write there ({parent} is not writable)")
 
 
 def check(scenario: Scenario, write: bool = True) -> Checked:
@@ -323,13 +313,9 @@ def run(
         from cake_drake.outputs.files import OutputDir
         from cake_drake.outputs.report import write_outputs
 
-        staged = OutputDir(checked.out)
-        try:
+        with OutputDir(checked.out) as staged:
             write_outputs(staged, result, worker, scenario.outputs.render, meshcat)
             result.written = staged.commit()
-        except BaseException:
-            staged.discard()
-            raise
         return result
     finally:
         if worker is not None:

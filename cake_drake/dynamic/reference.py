@@ -25,6 +25,31 @@ from cake_drake.geometric.trajectory import load_npz
 DIFFERENTIATORS = ("spline", "central")
 
 
+def _check_labels(path, n: int, gripper, phase, action, actions) -> None:
+    """Refuse label and gripper arrays a replay could not follow, naming the array."""
+    from cake_drake.geometric.trajectory import PHASE_NAMES
+
+    where = f"{path}: array"
+    for name, a in (("gripper", gripper), ("phase", phase), ("action", action)):
+        if a.shape != (n,) or a.dtype.kind not in "iuf":
+            raise InputError(f"{where} {name!r} must hold {n} numbers, one per time")
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"{where} {name!r} must be finite")
+    if np.any(gripper < 0) or np.any(gripper > 0.04):
+        raise InputError(f"{where} 'gripper' must be finger openings from 0 to 0.04 m")
+    if np.any(phase != np.round(phase)) or phase.min() < 0 or phase.max() >= len(PHASE_NAMES):
+        raise InputError(
+            f"{where} 'phase' must be whole numbers from 0 to {len(PHASE_NAMES) - 1} "
+            f"({', '.join(PHASE_NAMES)})"
+        )
+    top = len(actions) - 1 if actions else None
+    if np.any(action != np.round(action)) or action.min() < -1 or (
+        top is not None and action.max() > top
+    ):
+        bound = f"{top}" if top is not None else "the number of actions - 1"
+        raise InputError(f"{where} 'action' must be whole numbers from -1 (idle) to {bound}")
+
+
 @dataclass
 class ReferenceTrajectory:
     t: np.ndarray
@@ -62,6 +87,8 @@ class ReferenceTrajectory:
         n = len(t)
         phase = data.get("phase", np.zeros(n, int))
         action = data.get("action", -np.ones(n, int))
+        actions = tuple(str(s) for s in data.get("actions", ()))
+        _check_labels(path, n, data["gripper"], phase, action, actions)
         return cls(
             t,
             q,
@@ -71,7 +98,7 @@ class ReferenceTrajectory:
             phase,
             action,
             tuple(str(s) for s in data.get("phases", ())),
-            tuple(str(s) for s in data.get("actions", ())),
+            actions,
         )
 
     def executed_actions(self) -> tuple[str, ...]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections import Counter
 from pathlib import Path
 
-from cake_drake.errors import InputError
 from cake_drake.language.mapping import (
     AMBIGUOUS,
     DONE,
@@ -317,23 +316,19 @@ def write_outputs(analysis: Analysis, out_dir: Path) -> list[Path]:
     action last, so that ``python -m cake_drake.validate`` finds the same failure.
     ``problem.pddl`` includes the transcript's goal when it supplied one.
     """
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        plan = out_dir / "plan.txt"
+    from cake_drake.outputs.files import OutputDir
+
+    with OutputDir(out_dir) as staged:
         lines = [str(a) for a in analysis.plan_actions]
         lines.append(f"; cost = {len(analysis.plan_actions)} (unit cost)")
         lines.append(f"; transcribed from {analysis.transcript.source} by cake_drake.saycan")
         if analysis.failed_action:
             lines.append(f"; the last action, {analysis.failed_action}, is not applicable")
         lines.append(f"; {outcome(analysis)}")
-        plan.write_text("\n".join(lines) + "\n", encoding="utf-8")
-        problem = out_dir / "problem.pddl"
-        problem.write_text(analysis.problem.text, encoding="utf-8")
-        report = out_dir / "report.md"
-        report.write_text(render_markdown(analysis), encoding="utf-8")
-    except OSError as e:
-        raise InputError(f"{out_dir}: cannot write the outputs: {e.strerror or e}") from None
-    return [plan, problem, report]
+        staged.write_text("plan.txt", "\n".join(lines) + "\n")
+        staged.write_text("problem.pddl", analysis.problem.text)
+        staged.write_text("report.md", render_markdown(analysis))
+        return staged.commit()
 
 
 __all__ = [

@@ -7,6 +7,7 @@ import time
 import numpy as np
 from pydrake.math import RollPitchYaw
 
+from cake_drake.errors import InputError, OutputError
 from cake_drake.geometric.trajectory import save_npz
 from cake_drake.outputs.files import OutputDir
 from cake_drake.outputs.worker import OutputWorker
@@ -141,14 +142,20 @@ def write_outputs(
             (gravity_torques(cake.scene.control_plant, logs.q), "g(q): static gravity term")
         ],
     )
-    write_plan(plan, out.path("plan.txt"))
-    out.path("scenario.yaml").write_text(dump_scenario(cake.scenario))
-    samples, actions = trajectory_samples(cake, execution)
-    save_npz(out.path("trajectory.npz"), samples, actions)
+    try:
+        write_plan(plan, out.path("plan.txt"))
+        out.write_text("scenario.yaml", dump_scenario(cake.scenario))
+        samples, actions = trajectory_samples(cake, execution)
+        save_npz(out.path("trajectory.npz"), samples, actions)
+    except (OSError, InputError) as e:
+        raise OutputError(f"{out.out}: cannot write the outputs ({e})") from None
     if meshcat is not None:
         meshcat.StopRecording()
         meshcat.PublishRecording()
         out.path("replay.html").write_text(meshcat.StaticHtml())
-    worker.wait()
+    try:
+        worker.wait()
+    except RuntimeError as e:
+        raise OutputError(f"{out.out}: {e}") from None
     stages["outputs"] = time.perf_counter() - t0
     out.write_json("summary.json", summary(result))

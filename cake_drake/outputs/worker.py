@@ -41,6 +41,11 @@ def plot_png(job: dict) -> None:
 
 
 def _serve(conn, blocks, warm_poses, render: bool) -> None:
+    import signal
+
+    # Ctrl-C reaches the whole process group: the parent decides, the helper stays quiet.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     renderer = None
     try:
         if render:
@@ -106,15 +111,32 @@ class OutputWorker:
         self._conn.send(("plot", job))
         self._pending += 1
 
-    def wait(self) -> None:
-        """Wait for every submitted job; raises RuntimeError naming the first that failed."""
+    def wait(self, timeout_s: float = 120.0) -> None:
+        """Wait for every submitted job; raises RuntimeError naming the first that failed,
+        or saying that the helper died or did not answer within ``timeout_s``."""
+        import time
+
         errors = []
+        deadline = time.monotonic() + timeout_s
         while self._pending:
-            status, detail = self._conn.recv()
+            if not self._conn.poll(0.2):
+                if not self._process.is_alive():
+                    raise RuntimeError(
+                        f"the output helper stopped (exit code {self._process.exitcode}) "
+                        "before writing the picture and the plot"
+                    )
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the output helper did not answer in {timeout_s:g} s")
+                continue
+            try:
+                status, detail = self._conn.recv()
+            except EOFError:
+                raise RuntimeError("the output helper went away mid-job") from None
             if status == "error":
                 errors.append(detail)
                 if "failed to start" in detail:
                     break
+                self._pending -= 1
             else:
                 self._pending -= 1
         if errors:

@@ -14,7 +14,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
-from cake_drake.errors import InputError
+from cake_drake.errors import InputError, OutputError
 from cake_drake.symbolic.pddl import GroundAction
 from cake_drake.symbolic.sexpr import read_text
 
@@ -80,10 +80,14 @@ def format_plan(plan: Plan) -> str:
 
 def write_plan(plan: Plan, path: str | Path) -> None:
     """Write ``plan`` to ``path`` in the ``plan.txt`` format."""
-    try:
-        Path(path).write_text(format_plan(plan), encoding="utf-8")
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.part")
+    try:  # whole or not at all: a full disk leaves the old file (or none), never half
+        tmp.write_text(format_plan(plan), encoding="utf-8")
+        tmp.replace(path)
     except OSError as e:
-        raise InputError(f"{path}: cannot write the plan: {e.strerror or e}") from None
+        tmp.unlink(missing_ok=True)
+        raise OutputError(f"{path}: cannot write the plan: {e.strerror or e}") from None
 
 
 # "(name arg ...)", optionally preceded by a step number "3:" and followed by a

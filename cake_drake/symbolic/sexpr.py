@@ -48,6 +48,12 @@ def where(source: str, node: Node | None = None) -> str:
     return f"{source}:{node.line}:{node.col}"
 
 
+#: Inputs larger than this are refused unread: no domain, problem, plan or transcript is.
+MAX_INPUT_BYTES = 16 * 1024 * 1024
+#: Deepest nesting of parentheses accepted (a formula of a real domain nests < 10 deep).
+MAX_DEPTH = 64
+
+
 def read_text(path: str | Path, what: str = "file") -> str:
     """Return the text of ``path``, or raise one-line :class:`InputError`.
 
@@ -60,9 +66,18 @@ def read_text(path: str | Path, what: str = "file") -> str:
     if p.is_dir():
         raise InputError(f"{path}: is a directory, expected a {what}")
     try:
-        data = p.read_bytes()
+        size = p.stat().st_size
+        if size > MAX_INPUT_BYTES:
+            raise InputError(
+                f"{path}: {size / 1e6:.0f} MB is too large for a {what} "
+                f"(at most {MAX_INPUT_BYTES // 2**20} MiB)"
+            )
+        with p.open("rb") as f:  # bounded even if the file grows or is a pipe
+            data = f.read(MAX_INPUT_BYTES + 1)
     except OSError as e:
         raise InputError(f"{path}: cannot read {what}: {e.strerror or e}") from None
+    if len(data) > MAX_INPUT_BYTES:
+        raise InputError(f"{path}: too large for a {what} (more than 16 MiB)")
     nul = data.find(b"\x00")
     if nul >= 0:
         raise InputError(f"{path}: not a text file (NUL byte at offset {nul}); expected a {what}")
@@ -99,6 +114,11 @@ def parse_sexprs(text: str, source: str = "<string>") -> list[Node]:
                 i += 1
             continue
         if ch == "(":
+            if len(stack) >= MAX_DEPTH:
+                raise PddlError(
+                    f"{source}:{line}:{col}: parentheses nested more than {MAX_DEPTH} deep; "
+                    "no PDDL domain, problem or plan needs that many"
+                )
             stack.append(([], line, col))
             i, col = i + 1, col + 1
             continue

@@ -34,10 +34,45 @@ def _tilt(X: RigidTransform) -> float:
     return float(np.arccos(np.clip(np.max(np.abs(R[2, :])), -1.0, 1.0)))
 
 
-def read_facts(poses: Mapping[str, RigidTransform], size: float = CUBE_SIZE) -> Reading:
-    """Facts ``on``, ``on-table`` and ``clear`` for cubes at ``poses`` (world frame)."""
+#: A cube whose centre is this close to the grasp frame, between closed fingers, is held.
+HELD_TOL = 0.012  # m
+#: Finger opening (each finger, m) that says the fingers are closed on a 4 cm cube.
+GRIP_RANGE = (0.012, 0.026)
+
+
+def held_cube(
+    poses: Mapping[str, RigidTransform],
+    X_WG: RigidTransform | None,
+    finger_opening: float | None,
+) -> str | None:
+    """The cube in the hand, measured: its centre at the grasp frame, the fingers on it."""
+    if X_WG is None or finger_opening is None:
+        return None
+    if not GRIP_RANGE[0] <= finger_opening <= GRIP_RANGE[1]:
+        return None
+    p = X_WG.translation()
+    near = [n for n, X in sorted(poses.items()) if np.linalg.norm(X.translation() - p) < HELD_TOL]
+    return near[0] if len(near) == 1 else None
+
+
+def read_facts(
+    poses: Mapping[str, RigidTransform],
+    size: float = CUBE_SIZE,
+    X_WG: RigidTransform | None = None,
+    finger_opening: float | None = None,
+) -> Reading:
+    """Facts ``on``, ``on-table`` and ``clear`` for cubes at ``poses`` (world frame).
+
+    With the grasp frame's pose ``X_WG`` and the fingers' opening, the arm's state is read
+    too: ``(holding x)`` for the cube between the closed fingers, else ``(arm-empty)``.
+    """
     facts: set[tuple[str, ...]] = set()
     problems: list[str] = []
+    held = held_cube(poses, X_WG, finger_opening)
+    if X_WG is not None:
+        facts.add(("holding", held) if held else ("arm-empty",))
+        if held:
+            poses = {n: X for n, X in poses.items() if n != held}
     supported: set[str] = set()
     covered: set[str] = set()
     for name, X in sorted(poses.items()):
