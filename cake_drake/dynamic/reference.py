@@ -43,8 +43,10 @@ def _check_labels(path, n: int, gripper, phase, action, actions) -> None:
             f"({', '.join(PHASE_NAMES)})"
         )
     top = len(actions) - 1 if actions else None
-    if np.any(action != np.round(action)) or action.min() < -1 or (
-        top is not None and action.max() > top
+    if (
+        np.any(action != np.round(action))
+        or action.min() < -1
+        or (top is not None and action.max() > top)
     ):
         bound = f"{top}" if top is not None else "the number of actions - 1"
         raise InputError(f"{where} 'action' must be whole numbers from -1 (idle) to {bound}")
