@@ -8,7 +8,8 @@ do too.
 
 Exit codes (every command): 0 success; 1 no plan, or an invalid plan; 2 bad input
 (one line on stderr, nothing written); 3 the plan could not be executed in the
-simulated world. 130 when interrupted.
+simulated world; 4 the outputs could not be written (nothing was); 130 interrupted by
+Ctrl-C or SIGTERM (nothing was written).
 """
 
 from __future__ import annotations
@@ -125,6 +126,17 @@ def run_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _time_limit(value: float | None) -> float | None:
+    """A planner time limit from a flag: a positive, finite number of seconds (or none)."""
+    import math
+
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise InputError(
+            f"--time-limit {value:g}: the time limit must be a positive number of seconds"
+        )
+    return value
+
+
 def scenario_from_args(args: argparse.Namespace):
     """The scenario file (or the default) with every given flag written into it."""
     from cake_drake.scenario import (
@@ -158,7 +170,7 @@ def scenario_from_args(args: argparse.Namespace):
     if args.planner is not None:
         task.planner = args.planner
     if args.time_limit is not None:
-        task.time_limit = args.time_limit
+        task.time_limit = _time_limit(args.time_limit)
     if args.ik is not None:
         s.motion.ik = args.ik
     if args.reference is not None:
@@ -367,8 +379,13 @@ def main_plan(argv: list[str] | None = None) -> int:
         else (BLOCKSWORLD_DOMAIN, PROBLEM_5)
     )
     info = planner_info(args.planner)
+    time_limit = _time_limit(args.time_limit)
+    if args.output:
+        target = Path(args.output)
+        if target.is_dir() or not target.resolve().parent.is_dir():
+            raise InputError(f"{target}: cannot write the plan there (no such folder)")
     problem = load_problem(domain, problem_path)
-    plan = solve_problem(problem, info.name, args.time_limit)
+    plan = solve_problem(problem, info.name, time_limit)
 
     for action in plan.actions:
         print(action)
@@ -501,14 +518,17 @@ def main_saycan(argv: list[str] | None = None) -> int:
         render_text,
         write_outputs,
     )
+    from cake_drake.outputs.files import check_output_folder
 
     args = saycan_parser().parse_args(argv)
     planner_info(args.planner)
+    time_limit = _time_limit(args.time_limit)
+    out = args.out or Path("outputs") / "saycan" / Path(args.transcript).stem
+    check_output_folder(out)
     transcript = load_transcript(args.transcript)
     problem = load_problem(args.domain, args.problem, require_goal=False)
-    analysis = analyse(transcript, problem, args.planner, args.time_limit)
+    analysis = analyse(transcript, problem, args.planner, time_limit)
     print(render_text(analysis), end="")
-    out = args.out or Path("outputs") / "saycan" / Path(args.transcript).stem
     write_outputs(analysis, out)
     print(f"wrote {out}/plan.txt, problem.pddl, report.md")
     return EXIT_OK if analysis.ok else EXIT_NO_PLAN

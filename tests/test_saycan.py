@@ -637,7 +637,8 @@ def test_cli_exit_codes_and_outputs(name, tmp_path):
     r = saycan(*args)
     assert r.returncode == (0 if ok else 1), r.stderr
     assert r.stderr == ""
-    assert {p.name for p in tmp_path.iterdir()} == {"plan.txt", "problem.pddl", "report.md"}
+    written = {p.name for p in tmp_path.iterdir() if not p.name.startswith(".")}
+    assert written == {"plan.txt", "problem.pddl", "report.md"}
     report = (tmp_path / "report.md").read_text()
     assert report.startswith(f"# Language plan vs PDDL: {name}.txt")
     assert "## Note" in report and "**What would have been needed:**" in report

@@ -31,12 +31,12 @@ _HUMAN_LABELS = {"human", "user", "person"}
 _ROBOT_LABELS = {"robot", "assistant", "plan"}
 _GOAL_LABELS = {"goal"}
 _NOTE_LABELS = {"explanation", "note", "scene", "notes"}
-# A step number: 1-3 digits, then "." / ")" / ":" (spaces allowed before it), not part of
+# A step number: any number of digits, then "." / ")" / ":" (spaces allowed before it), not part of
 # a word, a decimal number or a time; optionally preceded by "step".
 _STEP = re.compile(
     r"(?<![^\s,;:(])"  # at the start, or after a space or a separator
     r"(?:step\s*)?"
-    r"(\d{1,3})\s*[.):](?![\d.)])",
+    r"(\d+)\s*[.):](?![\d.)])",
     re.IGNORECASE,
 )
 
