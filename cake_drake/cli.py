@@ -97,7 +97,20 @@ def run_parser() -> argparse.ArgumentParser:
     g.add_argument("--planner", help="task.planner: a registry name or module:attribute")
     g.add_argument("--time-limit", type=float, help="task.time_limit: planner limit, s")
     g.add_argument("--ik", help="motion.ik: drake | dls | module:attribute")
-    g.add_argument("--action-source", help="reference.action_source: plan | module:attribute")
+    g.add_argument(
+        "--action-source", help="reference.action_source: monitor | plan | module:attribute"
+    )
+    g.add_argument(
+        "--no-monitor",
+        action="store_true",
+        help="reference.action_source: plan (open loop: no checks against the world, no replans)",
+    )
+    g.add_argument(
+        "--fault",
+        action="append",
+        metavar="SPEC",
+        help="add a fault (repeatable): slip:K | knock:CUBE@T | move:CUBE@T:X,Y | random:SEED",
+    )
     g.add_argument(
         "--reference", type=Path, help="reference: replay this trajectory.npz (!Recorded)"
     )
@@ -182,10 +195,18 @@ def scenario_from_args(args: argparse.Namespace):
         if not isinstance(s.reference, Recorded):
             raise InputError("--differentiate goes with a recorded reference (--reference NPZ)")
         s.reference.differentiate = args.differentiate
+    if args.action_source is not None and args.no_monitor:
+        raise InputError("--no-monitor and --action-source both choose the action source")
+    if args.no_monitor:
+        args.action_source = "plan"
     if args.action_source is not None:
         if not isinstance(s.reference, Planned):
             raise InputError("--action-source goes with a planned reference, not --reference")
         s.reference.action_source = args.action_source
+    if args.fault:
+        from cake_drake.world.faults import parse_fault
+
+        s.faults = [*s.faults, *(parse_fault(spec) for spec in args.fault)]
     if args.out is not None:
         s.outputs.folder = str(args.out)
     if args.no_render:
@@ -213,6 +234,13 @@ def main_run(argv: list[str] | None = None) -> int:
     result = run(scenario, quiet=args.quiet, started=STARTED)
     e = result.execution
     rate = f"{e.sim_s:.1f} s simulated in {e.wall_s:.2f} s (RTF {e.rtf:.1f})"
+    events = e.monitoring.get("events", [])
+    if events:
+        replans = e.monitoring.get("replans", 0)
+        rate = (
+            f"recovered after {len(events)} disagreement{'s' * (len(events) > 1)} with the plan "
+            f"({replans} replan{'s' * (replans != 1)}) — " + rate
+        )
     where = f"outputs in {scenario.outputs.folder}/"
     if result.success:
         print(f"goal reached: {tower_text(e)} — {rate}; {where}")

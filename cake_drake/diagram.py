@@ -35,8 +35,9 @@ from cake_drake.geometric.solve import TimedSolver
 from cake_drake.scenario import Recorded, Scenario, resolve_path
 from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
-from cake_drake.systems import make_action_source
+from cake_drake.systems import SourceContext, make_action_source
 from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
+from cake_drake.world.faults import Knock, Pusher, Slip, SlipFingers
 from cake_drake.world.scene import Q_HOME, X_HAND_GRASP, Scene, add_world, make_control_plant
 
 #: The reference ports that are logged, with the arm's state and the torques.
@@ -56,6 +57,22 @@ class ReferenceSource:
     def port(self, name: str):
         return self.system.GetOutputPort(name)
 
+    def monitoring(self, root_context) -> dict:
+        """What an execution monitor recorded: ``events``, ``replans``, ``checks`` (empty
+        for an open-loop source)."""
+        source = self.action_source
+        if source is None or not hasattr(source, "state"):
+            return {}
+        s = source.state(source.GetMyContextFromRoot(root_context))
+        return {"events": list(s.events), "replans": s.replans, "checks": s.checks}
+
+    def executed(self, root_context) -> tuple[str, ...]:
+        """The actions executed, by name, in order (an action source may have chosen them)."""
+        source = self.action_source
+        if source is not None and hasattr(source, "executed"):
+            return tuple(str(a) for a in source.executed(source.GetMyContextFromRoot(root_context)))
+        return self.actions
+
     def status(self, root_context) -> tuple[int, bool, str | None, tuple[str, ...]]:
         """(actions done, finished, the error that stopped execution or None, collision
         warnings). Planned: finished when the action source has no next action and the
@@ -64,8 +81,12 @@ class ReferenceSource:
             prog = self.waypoint_ik.progress(self.waypoint_ik.GetMyContextFromRoot(root_context))
             source_context = self.action_source.GetMyContextFromRoot(root_context)
             command = self.action_source.GetOutputPort("action").Eval(source_context)
-            finished = command.action is None and prog.working < 0
-            return prog.done, finished, prog.error, prog.warnings
+            finished = command.action is None and command.index == prog.done
+            finished = finished and prog.working < 0
+            error = prog.error
+            if error is None and hasattr(self.action_source, "error"):
+                error = self.action_source.error(source_context)
+            return prog.done, finished, error, prog.warnings
         context = self.system.GetMyContextFromRoot(root_context)
         done = int(round(self.port("actions_done").Eval(context)[0]))
         return done, done >= len(self.actions), None, ()
@@ -84,6 +105,12 @@ class CakeDiagram:
     ik: TimedSolver | None = None
 
 
+def _default_planner():
+    from cake_drake.symbolic import DEFAULT_PLANNER, solve_problem
+
+    return lambda problem, time_limit: solve_problem(problem, DEFAULT_PLANNER, time_limit)
+
+
 def _add_reference(
     builder: DiagramBuilder,
     scenario: Scenario,
@@ -91,6 +118,7 @@ def _add_reference(
     actions: Sequence[GroundAction],
     problem: Problem,
     q_start: np.ndarray,
+    planner,
 ) -> tuple[ReferenceSource, TimedSolver | None]:
     """The one place that tells a planned reference from a recorded one."""
     ref = scenario.reference
@@ -99,10 +127,6 @@ def _add_reference(
         system = builder.AddNamedSystem("reference", replay.make_source())
         return ReferenceSource(system, replay.executed_actions(), replay=replay), None
     plant = scene.plant
-    source = builder.AddNamedSystem(
-        "action_source",
-        make_action_source(ref.action_source, actions, problem, list(scene.cubes)),
-    )
     kinematics = Kinematics(scene.control_plant)
     solver = TimedSolver(make_solver(scenario.motion.ik, kinematics, scenario.seed))
     motion = scenario.motion
@@ -113,6 +137,10 @@ def _add_reference(
         X_hand_grasp=X_HAND_GRASP,
         slots=scenario.world.slots,
     )
+    context = SourceContext(
+        tuple(actions), problem, indices, planner, scenario.world.time_step, ref.max_replans
+    )
+    source = builder.AddNamedSystem("action_source", make_action_source(ref.action_source, context))
     roles = blocksworld_roles(problem.domain)
     settings = MotionSettings(
         motion.timing,
@@ -137,6 +165,8 @@ def _add_reference(
     builder.Connect(plant.get_body_poses_output_port(), waypoint_ik.GetInputPort("body_poses"))
     if source.HasInputPort("body_poses"):
         builder.Connect(plant.get_body_poses_output_port(), source.GetInputPort("body_poses"))
+    if source.HasInputPort("hand_state"):
+        builder.Connect(plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state"))
     names = tuple(str(a) for a in actions)
     return ReferenceSource(waypoint_ik, names, waypoint_ik, source), solver
 
@@ -148,11 +178,16 @@ def build_diagram(
     actions: Sequence[GroundAction] = (),
     q_start: np.ndarray = Q_HOME,
     meshcat=None,
+    planner=None,
+    faults=(),
 ) -> CakeDiagram:
     """Wire the action source, geometry and controller around the simulated Panda, for
     ``problem``'s blocks starting at ``initial_poses`` and the planned ``actions``.
 
     ``meshcat`` (a ``pydrake.geometry.Meshcat``) adds a visualizer; never needed headless.
+    ``planner`` is what an action source may replan with (default: the default planner).
+    ``faults`` are resolved faults (:mod:`cake_drake.world.faults`): slips and knocks become
+    systems here; moves happen in :func:`cake_drake.execution.execute`.
     """
     controller = make_controller(scenario.controller)
     blocks = list(blocksworld_view(problem).blocks)
@@ -165,8 +200,28 @@ def build_diagram(
     plant.SetDefaultPositions(scene.arm, q_start)
     plant.SetDefaultPositions(scene.hand, [0.04, 0.04])
 
-    reference, solver = _add_reference(builder, scenario, scene, actions, problem, q_start)
-    builder.Connect(reference.port("finger_state"), plant.get_desired_state_input_port(scene.hand))
+    reference, solver = _add_reference(
+        builder, scenario, scene, actions, problem, q_start, planner or _default_planner()
+    )
+    finger_command = reference.port("finger_state")
+    slips = [f.action for f in faults if isinstance(f, Slip)]
+    if slips:
+        slip = builder.AddNamedSystem("fault_slip", SlipFingers(slips))
+        builder.Connect(finger_command, slip.GetInputPort("finger_state"))
+        builder.Connect(reference.port("labels"), slip.GetInputPort("labels"))
+        finger_command = slip.GetOutputPort("finger_command")
+    builder.Connect(finger_command, plant.get_desired_state_input_port(scene.hand))
+    pushes = [
+        (int(scene.cube_body(f.cube).index()), f.time, f.duration, f.force)
+        for f in faults
+        if isinstance(f, Knock)
+    ]
+    if pushes:
+        pusher = builder.AddNamedSystem("fault_knock", Pusher(pushes))
+        builder.Connect(plant.get_body_poses_output_port(), pusher.GetInputPort("body_poses"))
+        builder.Connect(
+            pusher.GetOutputPort("forces"), plant.get_applied_spatial_force_input_port()
+        )
     tau = controller.add_to(
         builder, scene, reference.port("desired_state"), reference.port("desired_acceleration")
     )

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -18,6 +18,7 @@ from pydrake.systems.analysis import Simulator
 
 from cake_drake.diagram import CakeDiagram
 from cake_drake.world.facts import Reading, read_facts, stack_offsets
+from cake_drake.world.faults import move_cube
 from cake_drake.world.scene import cube_poses
 
 STACK_TOL = 0.005  # m: a stacked cube must stand within this of the one below (xy)
@@ -63,6 +64,8 @@ class Execution:
     warnings: tuple[str, ...]  # collisions found along the planned moves
     q_final: np.ndarray  # arm joints at the end
     fingers_final: float  # opening of one finger at the end (m)
+    actions: tuple[str, ...] = ()  # the actions executed, in order
+    monitoring: dict = field(default_factory=dict)  # the monitor's events, replans, checks
 
     @property
     def rtf(self) -> float:
@@ -124,16 +127,29 @@ def execute(
     settle_s: float = 0.3,
     chunk_s: float = 0.25,
     progress: ProgressBar | None = None,
+    moves=(),
 ) -> Execution:
-    """Run the simulation to the end of the reference's actions (or an error, or the budget)."""
+    """Run the simulation to the end of the reference's actions (or an error, or the budget).
+
+    ``moves`` are :class:`cake_drake.world.faults.Move` faults: at each one's time the
+    cube is set down elsewhere on the table.
+    """
     simulator = Simulator(cake.diagram)
     context = simulator.get_mutable_context()
     simulator.Initialize()
+    plant = cake.scene.plant
+    pending = sorted(moves, key=lambda m: m.time)
     t0 = time.perf_counter()
     t = 0.0
     while True:
         t = min(t + chunk_s, max_sim_s)
+        if pending and pending[0].time <= t:
+            t = pending[0].time
         simulator.AdvanceTo(t)
+        while pending and pending[0].time <= t:
+            m = pending.pop(0)
+            plant_context = plant.GetMyMutableContextFromRoot(context)
+            move_cube(plant, plant_context, cake.scene.cube_body(m.cube), m.x, m.y)
         done, finished, error, warnings = cake.reference.status(context)
         if progress:
             progress.update(t, time.perf_counter() - t0, done)
@@ -163,4 +179,6 @@ def execute(
         warnings=warnings,
         q_final=cake.scene.plant.GetPositions(plant_context, cake.scene.arm).copy(),
         fingers_final=fingers,
+        actions=cake.reference.executed(context),
+        monitoring=cake.reference.monitoring(context),
     )

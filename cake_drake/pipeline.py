@@ -40,6 +40,7 @@ from cake_drake.symbolic import (
     validate_plan,
 )
 from cake_drake.symbolic.roles import blocksworld_view
+from cake_drake.world.faults import Move, RandomFault, Slip, check_faults, resolve_random
 from cake_drake.world.scene import layout
 
 #: A planner: ``(problem, time_limit) -> Plan`` (or a sequence of ground actions).
@@ -74,6 +75,7 @@ class RunResult:
     stages: dict[str, float] = field(default_factory=dict)
     written: list[Path] = field(default_factory=list)
     unmet: list[str] = field(default_factory=list)
+    faults: list = field(default_factory=list)  # the faults as they happened (seeds resolved)
 
 
 def _range(value: float, lo: float, hi: float, what: str, unit: str = "") -> None:
@@ -176,10 +178,28 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     else:
         resolve(s.reference.action_source, ACTION_SOURCES, "action source")
         resolve(s.motion.ik, SOLVERS, "IK solver")
+    view = blocksworld_view(problem)
+    check_faults([f for f in s.faults if not isinstance(f, Slip)], view.blocks, n_actions=1 << 30)
     out = Path(s.outputs.folder) if write else None
     if out is not None:
         check_output_folder(out)
     return Checked(s, problem, planner, out)
+
+
+#: Expected simulated seconds per action, to draw a random fault's time within the run.
+SECONDS_PER_ACTION = 1.9
+
+
+def resolve_faults(faults, blocks, n_actions: int) -> list:
+    """The scenario's faults with seeds drawn, checked against the plan (before simulating)."""
+    out = [
+        resolve_random(f, blocks, n_actions, SECONDS_PER_ACTION * n_actions)
+        if isinstance(f, RandomFault)
+        else f
+        for f in faults
+    ]
+    check_faults(out, blocks, n_actions)
+    return out
 
 
 def get_plan(checked: Checked) -> Plan:
@@ -289,7 +309,17 @@ def run(
                 )
 
         t = time.perf_counter()
-        cake = build_diagram(scenario, problem, initial, plan.actions, meshcat=meshcat)
+        faults = resolve_faults(scenario.faults, blocks, plan.length)
+        planner = checked.planner or PLANNER_REGISTRY[DEFAULT_PLANNER]
+        cake = build_diagram(
+            scenario,
+            problem,
+            initial,
+            plan.actions,
+            meshcat=meshcat,
+            planner=planner,
+            faults=faults,
+        )
         stages["diagram_build"] = time.perf_counter() - t
 
         names = cake.reference.actions
@@ -299,14 +329,17 @@ def run(
         if meshcat is not None:
             meshcat.StartRecording()
         sim = scenario.simulation
-        execution = execute(cake, sim.max_sim_s, sim.settle_s, progress=progress)
+        moves = [f for f in faults if isinstance(f, Move)]
+        execution = execute(cake, sim.max_sim_s, sim.settle_s, progress=progress, moves=moves)
         for warning in execution.warnings:
             print(f"warning: collision: {warning}", file=sys.stderr)
         stages["simulation"] = execution.wall_s
         if cake.ik is not None:
             stages["ik"] = sum(cake.ik.times_ms) / 1000
         success, unmet, message = verdict(problem, execution)
-        result = RunResult(success, message, plan, execution, cake, problem, stages, [], unmet)
+        result = RunResult(
+            success, message, plan, execution, cake, problem, stages, [], unmet, faults
+        )
         if checked.out is None:
             return result
 

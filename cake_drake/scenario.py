@@ -41,6 +41,7 @@ from cake_drake.errors import InputError
 from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
 from cake_drake.symbolic import DEFAULT_PLANNER
+from cake_drake.world.faults import FaultConfig, Knock, Move, RandomFault, Slip
 from cake_drake.world.scene import WorldConfig
 
 PACKAGE = "package://cake_drake/"
@@ -75,10 +76,11 @@ class Motion:
 class Planned:
     """The reference comes from an action source, through the waypoint/IK layer."""
 
-    #: ``plan`` (the planner's plan, one action after another) or module:attribute of a
-    #: factory ``(actions) -> LeafSystem`` with an ``actions_done`` input and an ``action``
-    #: output (and, if it wants, a ``body_poses`` input).
-    action_source: str = "plan"
+    #: ``monitor`` (the plan, each action checked against the measured world, replanned
+    #: when it disagrees), ``plan`` (open loop) or module:attribute of a factory
+    #: ``(SourceContext) -> System`` (see :func:`cake_drake.systems.make_action_source`).
+    action_source: str = "monitor"
+    max_replans: int = 5  # the monitor's budget of replans in one run
 
 
 @dataclass
@@ -123,6 +125,8 @@ class Scenario:
     simulation: Simulation = field(default_factory=Simulation)
     outputs: Outputs = field(default_factory=Outputs)
     visualization: Visualization = field(default_factory=Visualization)
+    #: Disturbances of the world (cake_drake.world.faults): !Slip, !Knock, !Move, !RandomFault.
+    faults: list[FaultConfig] = field(default_factory=list)
     seed: int = 0  # IK restarts draw from it; the same seed gives the same run
 
 
@@ -392,6 +396,10 @@ def controller_for_mode(mode: str) -> ControllerConfig:
 
 __all__ = [
     "ComputedTorque",
+    "Knock",
+    "Move",
+    "RandomFault",
+    "Slip",
     "CustomController",
     "JointPd",
     "Motion",

@@ -74,6 +74,18 @@ def gripper_down(yaw: float) -> RotationMatrix:
     return RotationMatrix.MakeZRotation(yaw) @ RotationMatrix.MakeXRotation(math.pi)
 
 
+def face_yaw(X: RigidTransform) -> float:
+    """The yaw of a cube's faces about world z, whichever face is down.
+
+    A cube is symmetric: of its three axes, the one nearest to vertical says which face
+    is down, and either of the other two gives the yaw (modulo 90 degrees).
+    """
+    R = X.rotation().matrix()
+    down = int(np.argmax(np.abs(R[2, :])))
+    side = R[:, (down + 1) % 3]
+    return float(math.atan2(side[1], side[0]))
+
+
 def _yaw(X: RigidTransform) -> float:
     return float(RollPitchYaw(X.rotation()).yaw_angle())
 
@@ -123,7 +135,7 @@ def waypoints_for(
         X_WB = poses[block]
         p = X_WB.translation()
         preferred = math.atan2(p[1], p[0]) + params.yaw_turns * math.pi / 2
-        yaw = _nearest_turn(_yaw(X_WB), preferred)
+        yaw = _nearest_turn(face_yaw(X_WB), preferred)
         R = gripper_down(yaw)
         z_transit = _transit_height(poses, held=None, params=params)
         above = max(z_transit, p[2] + params.approach)
@@ -136,7 +148,7 @@ def waypoints_for(
         if name == "stack":
             X_WS = poses[args[1]]
             target = X_WS.translation() + [0, 0, CUBE_SIZE + params.place_drop]
-            target_yaw = _yaw(X_WS)
+            target_yaw = face_yaw(X_WS)
         else:
             x, y = free_slot(poses, block, params, world.slots)
             target = np.array([x, y, CUBE_SIZE / 2 + params.place_drop])
@@ -146,7 +158,7 @@ def waypoints_for(
         # Cube yaw that is a quarter turn of the target's, with the gripper yaw nearest
         # to the comfortable one.
         preferred = math.atan2(target[1], target[0]) + params.yaw_turns * math.pi / 2
-        grip_minus_cube = _yaw(world.X_WG) - _yaw(poses[block])
+        grip_minus_cube = _yaw(world.X_WG) - face_yaw(poses[block])
         cube_yaw = _nearest_turn(target_yaw, preferred - grip_minus_cube)
         X_WB_target = RigidTransform(RotationMatrix.MakeZRotation(cube_yaw), target)
         X_place = X_WB_target @ X_GB.inverse()

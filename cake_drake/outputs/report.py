@@ -37,7 +37,7 @@ def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str
         "phase": logs.phase.astype(np.int16),
         "action": logs.action.astype(np.int16),
     }
-    return samples, list(cake.reference.actions)
+    return samples, list(execution.actions)
 
 
 def summary(result) -> dict:
@@ -75,6 +75,10 @@ def summary(result) -> dict:
             "time_s": round(plan.time_s, 4),
         },
         "actions_done": execution.actions_done,
+        "executed": list(execution.actions),
+        "replans": execution.monitoring.get("replans", 0),
+        "faults": [{"kind": type(f).__name__, **vars(f)} for f in result.faults],
+        "events": execution.monitoring.get("events", []),
         "error": execution.error,
         "collisions": list(execution.warnings),
         "blocks": blocks,

@@ -1,39 +1,69 @@
-"""The project's own LeafSystems, one per file: :class:`PlanSource` and :class:`WaypointIk`.
+"""The project's own LeafSystems, one per file: :class:`PlanSource`,
+:class:`ExecutionMonitor` and :class:`WaypointIk`.
 
 :data:`ACTION_SOURCES` is the registry of action sources a scenario can name
-(``reference: {action_source: plan}``); :func:`make_action_source` builds one, or a
+(``reference: {action_source: monitor}``); :func:`make_action_source` builds one, or a
 user's ``module:attribute`` factory, and checks its ports.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable
+from dataclasses import dataclass
 
 from pydrake.systems.framework import LeafSystem
 
 from cake_drake.errors import InputError
 from cake_drake.plugins import resolve
 from cake_drake.symbolic import GroundAction, Problem
+from cake_drake.systems.monitor import ExecutionMonitor
 from cake_drake.systems.plan_source import ActionCommand, PlanSource
-
-#: Action sources by name, each a factory ``(actions, problem, blocks) -> System``.
-ACTION_SOURCES = {"plan": lambda actions, problem, blocks: PlanSource(actions)}
+from cake_drake.systems.waypoint_ik import WorldIndices
 
 
-def make_action_source(
-    spec: str, actions: Sequence[GroundAction], problem: Problem, blocks: Sequence[str]
-) -> LeafSystem:
-    """The action source ``spec`` names.
+@dataclass(frozen=True)
+class SourceContext:
+    """What an action-source factory is given."""
 
-    A factory is called with the planned ``actions``, the ``problem`` (its goal, for a
-    policy that decides for itself) and the ``blocks`` in the order of the plant's cube
-    bodies. Protocol of what it returns: a System with a vector input ``actions_done``
+    actions: tuple[GroundAction, ...]  # the planner's plan
+    problem: Problem  # its goal, its domain (read by structure: symbolic.roles)
+    world: WorldIndices  # where the cubes and the hand are in the plant's body_poses
+    planner: Callable  # the run's planner, (problem, time_limit) -> Plan, for replanning
+    period: float  # the simulation step (s), for a periodic update
+    max_replans: int = 5
+
+
+#: Action sources by name, each a factory ``(SourceContext) -> System``: ``monitor`` (the
+#: default: checks every action against the measured world and replans) and ``plan``
+#: (open loop: the plan's actions one after another).
+ACTION_SOURCES: dict[str, Callable[[SourceContext], LeafSystem]] = {
+    "plan": lambda c: PlanSource(c.actions),
+    "monitor": lambda c: ExecutionMonitor(
+        c.actions,
+        c.problem,
+        dict(c.world.cube_bodies),
+        c.world.hand_body,
+        c.world.X_hand_grasp,
+        c.planner,
+        c.period,
+        c.max_replans,
+    ),
+}
+
+
+def make_action_source(spec: str, context: SourceContext) -> LeafSystem:
+    """The action source ``spec`` names, built from ``context``.
+
+    Protocol of what a factory returns: a System with a vector input ``actions_done``
     (size 1) and an abstract output ``action`` holding an :class:`ActionCommand` (index =
-    actions done; ``action=None`` once it has nothing more to do). It may also have an
-    abstract input ``body_poses`` (the plant's body poses), which is then connected.
+    actions done; ``action=None`` with that index once it has nothing more to do). It may
+    also have the abstract input ``body_poses`` (the plant's body poses) and the vector
+    input ``hand_state`` (the fingers' positions and velocities), which are then
+    connected, and the methods ``error(context)`` (why it stopped, or None) and
+    ``executed(context)`` (the actions it gave, in order).
     """
     factory = resolve(spec, ACTION_SOURCES, "action source")
-    system = factory(tuple(actions), problem, tuple(blocks))
+    system = factory(context)
     if not hasattr(system, "HasInputPort"):
         raise InputError(
             f"action source {spec!r} returned a {type(system).__name__}, not a Drake System"
@@ -48,4 +78,11 @@ def make_action_source(
     return system
 
 
-__all__ = ["ACTION_SOURCES", "ActionCommand", "PlanSource", "make_action_source"]
+__all__ = [
+    "ACTION_SOURCES",
+    "ActionCommand",
+    "ExecutionMonitor",
+    "PlanSource",
+    "SourceContext",
+    "make_action_source",
+]

@@ -206,6 +206,8 @@ def add_world(
     _add_grasp_frame(plant, hand)
     parser.AddModelsFromString(cube_directives(blocks, initial_poses), "dmd.yaml")
     cubes = {name: plant.GetModelInstanceByName(f"block_{name}") for name in blocks}
+    for instance in cubes.values():
+        _add_side_supports(plant, plant.GetBodyByName("cube", instance))
     for joint_name in FINGER_JOINTS:
         actuator = plant.GetJointActuatorByName(f"{joint_name}_motor", hand)
         actuator.set_controller_gains(PdControllerGains(p=config.finger_kp, d=config.finger_kd))
@@ -217,6 +219,44 @@ def add_world(
     _filter_robot_collisions(plant, scene_graph, arm, hand)
     _filter_cube_collisions(plant, scene_graph, cubes)
     return Scene(plant, scene_graph, arm, hand, cubes)
+
+
+#: Where the cube model's eight support spheres sit (its bottom and top faces, 8 mm in
+#: from the edges); :func:`_add_side_supports` gives the four side faces the same.
+_SUPPORT_IN, _SUPPORT_OUT = 0.012, 0.018
+
+
+def _add_side_supports(plant: MultibodyPlant, body) -> None:
+    """Support spheres for the four side faces, like those the model has on top and bottom.
+
+    A cube knocked over lands on a side face; with spheres only on its top and bottom it
+    would sink into the table to its spheres (6 mm) and read as resting on nothing.
+    """
+    from pydrake.geometry import Sphere
+
+    props = _support_properties()  # the model's: mu 1, stiffness 1e6, dissipation 5
+    for axis in (0, 1):
+        for sign in (-1.0, 1.0):
+            for a in (-_SUPPORT_IN, _SUPPORT_IN):
+                for b in (-_SUPPORT_IN, _SUPPORT_IN):
+                    p = [0.0, 0.0, 0.0]
+                    p[axis] = sign * _SUPPORT_OUT
+                    p[1 - axis], p[2] = a, b
+                    name = f"corner_side_{axis}{int(sign > 0)}{int(a > 0)}{int(b > 0)}"
+                    plant.RegisterCollisionGeometry(
+                        body, RigidTransform(p), Sphere(0.002), name, props
+                    )
+
+
+def _support_properties():
+    from pydrake.geometry import ProximityProperties
+    from pydrake.multibody.plant import CoulombFriction
+
+    props = ProximityProperties()
+    props.AddProperty("material", "coulomb_friction", CoulombFriction(1.0, 1.0))
+    props.AddProperty("material", "point_contact_stiffness", 1e6)
+    props.AddProperty("material", "hunt_crossley_dissipation", 5.0)
+    return props
 
 
 def _filter_robot_collisions(plant, scene_graph, arm, hand) -> None:

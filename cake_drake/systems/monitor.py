@@ -1,0 +1,232 @@
+"""``ExecutionMonitor``: the symbolic layer closing the loop on the measured world."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import BasicVector, LeafSystem
+
+from cake_drake.errors import CakeDrakeError
+from cake_drake.symbolic import GroundAction, Plan, Problem, fact_str, validate_plan
+from cake_drake.symbolic.kernels import kernels, latest_kernel
+from cake_drake.symbolic.roles import blocksworld_roles
+from cake_drake.systems.plan_source import ActionCommand
+from cake_drake.world.facts import read_facts
+
+#: How long (s) the monitor waits for a disturbed world to come to rest before it judges.
+SETTLE_WAIT_S = 1.5
+#: A cube farther than this from the robot's base is out of the arm's reach.
+TABLE_REACH = 0.85  # m
+
+
+@dataclass(frozen=True)
+class MonitorState:
+    """Immutable: Drake's state copies share it."""
+
+    plan: tuple[GroundAction, ...]
+    pos: int = 0  # index into ``plan`` of the action to emit next
+    seen: int = -1  # actions done when the world was last checked (-1: not yet)
+    replans: int = 0
+    checks: int = 0
+    emitted: tuple[GroundAction, ...] = ()  # the action given at each global index
+    events: tuple[dict, ...] = ()
+    error: str | None = None
+    waiting_since: float | None = None  # the world was not at rest: waiting since then
+
+    def __deepcopy__(self, memo):
+        return self
+
+
+class ExecutionMonitor(LeafSystem):
+    """Checks the measured world after every action against what the rest of the plan
+    needs (its triangle-table kernels), skips ahead or repeats where a kernel holds, and
+    replans from the measured facts where none does.
+
+    .. pydrake_system::
+
+        name: ExecutionMonitor
+        input_ports:
+        - actions_done
+        - body_poses
+        - hand_state
+        output_ports:
+        - action
+
+    ``hand_state`` is the hand's state (finger positions and velocities): with the grasp
+    frame's pose it tells a cube really in the hand from one that slipped. ``action`` is
+    an :class:`ActionCommand` for the next action; while a finished action is being
+    checked it carries an index behind ``actions_done``, so nothing starts and the run is
+    not taken as finished. At most ``max_replans`` replans; an unrecoverable world (a
+    cube off the table, the budget spent, no plan from the measured facts) stops the run
+    with :meth:`error` naming the fact.
+    """
+
+    def __init__(
+        self,
+        actions: Sequence[GroundAction],
+        problem: Problem,
+        cube_bodies: dict[str, int],
+        hand_body: int,
+        X_hand_grasp: RigidTransform,
+        planner: Callable,
+        period: float,
+        max_replans: int = 5,
+    ) -> None:
+        super().__init__()
+        self._problem = problem
+        self._roles = blocksworld_roles(problem.domain)
+        vocabulary = set(self._roles.vocabulary.as_dict().values())
+        self._static = frozenset(f for f in problem.init if f[0] not in vocabulary)
+        self._bodies = dict(cube_bodies)
+        self._hand = hand_body
+        self._X_HG = X_hand_grasp
+        self._planner = planner
+        self._max_replans = max_replans
+        self._done_port = self.DeclareVectorInputPort("actions_done", 1)
+        self._poses_port = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()])
+        )
+        self._hand_port = self.DeclareVectorInputPort("hand_state", BasicVector(4))
+        initial = MonitorState(tuple(actions))
+        self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
+        self.DeclareAbstractOutputPort(
+            "action",
+            lambda: AbstractValue.Make(ActionCommand(0, None)),
+            self._calc_action,
+            prerequisites_of_calc={
+                self.abstract_state_ticket(self._state),
+                self._done_port.ticket(),
+            },
+        )
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+    # --- reading -------------------------------------------------------------------------
+
+    def state(self, context) -> MonitorState:
+        return context.get_abstract_state(self._state).get_value()
+
+    def error(self, context) -> str | None:
+        return self.state(context).error
+
+    def executed(self, context) -> tuple[GroundAction, ...]:
+        return self.state(context).emitted
+
+    def measured_facts(self, context):
+        """(facts in the domain's names, static facts included; what could not be read)."""
+        poses = self._poses_port.Eval(context)
+        cubes = {n: poses[i] for n, i in self._bodies.items()}
+        X_WG = poses[self._hand] @ self._X_HG
+        fingers = float(self._hand_port.Eval(context)[0])
+        reading = read_facts(cubes, X_WG=X_WG, finger_opening=fingers)
+        lost = [
+            f"{n} fell off the table (at {np.round(X.translation(), 2).tolist()} m)"
+            for n, X in sorted(cubes.items())
+            if X.translation()[2] < -0.01
+        ] + [
+            f"{n} is out of the arm's reach ({np.hypot(*X.translation()[:2]):.2f} m from its base)"
+            for n, X in sorted(cubes.items())
+            if np.hypot(*X.translation()[:2]) > TABLE_REACH
+        ]
+        facts = self._roles.from_canonical(reading.facts) | self._static
+        return facts, tuple(lost), reading.problems
+
+    # --- deciding ------------------------------------------------------------------------
+
+    def _calc_action(self, context, output) -> None:
+        s = self.state(context)
+        done = int(round(self._done_port.Eval(context)[0]))
+        if s.error is not None or s.seen != done:
+            # Being checked (or stopped): an index behind, so nothing starts and the run
+            # does not count as finished until the error is read.
+            output.set_value(ActionCommand(done if s.error else done - 1, None))
+            return
+        action = s.plan[s.pos] if s.pos < len(s.plan) else None
+        output.set_value(ActionCommand(done, action))
+
+    def _update(self, context, state) -> None:
+        s = self.state(context)
+        done = int(round(self._done_port.Eval(context)[0]))
+        if s.error is not None or s.seen == done:
+            return
+        t = context.get_time()
+        facts, lost, unread = self.measured_facts(context)
+        if lost:
+            self._set(state, replace(s, error=f"the world cannot be recovered: {lost[0]}"))
+            return
+        if unread:  # falling or rolling: wait for the world to come to rest
+            since = t if s.waiting_since is None else s.waiting_since
+            if t - since < SETTLE_WAIT_S:
+                self._set(state, replace(s, waiting_since=since))
+                return
+            self._set(
+                state, replace(s, error=f"the world cannot be recovered: {'; '.join(unread)}")
+            )
+            return
+        nominal = s.pos + 1 if s.seen >= 0 else 0
+        ks = kernels(self._problem, s.plan)
+        i = latest_kernel(ks, facts)
+        s = replace(s, checks=s.checks + 1, waiting_since=None)
+        if i is None:
+            s = self._replan(s, t, done, facts, ks[min(nominal, len(ks) - 1)])
+        elif i != nominal:
+            kind = "skip ahead" if i > nominal else "repeat"
+            s = replace(
+                s,
+                pos=i,
+                events=s.events
+                + (self._event(t, done, kind, s, ks[min(nominal, len(ks) - 1)], facts),),
+            )
+        else:
+            s = replace(s, pos=i)
+        if s.error is None and s.pos < len(s.plan):
+            s = replace(s, emitted=s.emitted[:done] + (s.plan[s.pos],))
+        self._set(state, replace(s, seen=done))
+
+    def _replan(self, s: MonitorState, t: float, done: int, facts, expected) -> MonitorState:
+        event = self._event(t, done, "replan", s, expected, facts)
+        if s.replans >= self._max_replans:
+            return replace(
+                s,
+                events=s.events + (event,),
+                error=f"the world cannot be recovered: the replan budget ({self._max_replans}) "
+                f"is spent; missing {event['missing'][:3]}",
+            )
+        problem = dataclasses.replace(self._problem, init=frozenset(facts))
+        try:
+            result = self._planner(problem, None)
+            actions = tuple(result.actions if isinstance(result, Plan) else result)
+            check = validate_plan(problem, actions)
+            if not check.ok:
+                raise CakeDrakeError(check.message)
+        except CakeDrakeError as e:
+            return replace(
+                s,
+                events=s.events + (event,),
+                error=f"the world cannot be recovered: no plan from the measured facts ({e})",
+            )
+        event["new_plan"] = [str(a) for a in actions]
+        return replace(s, plan=actions, pos=0, replans=s.replans + 1, events=s.events + (event,))
+
+    def _event(self, t, done, kind, s: MonitorState, expected, facts) -> dict:
+        after = str(s.emitted[done - 1]) if 0 < done <= len(s.emitted) else None
+        missing = sorted(expected - facts)
+        touched = {a for f in missing for a in f[1:]}
+        return {
+            "time_s": round(t, 3),
+            "after_action": after,
+            "kind": kind,
+            "missing": [fact_str(f) for f in missing],
+            "measured": [
+                fact_str(f)
+                for f in sorted(facts - expected)
+                if f not in self._static and set(f[1:]) & touched
+            ],
+        }
+
+    def _set(self, state, value: MonitorState) -> None:
+        state.get_mutable_abstract_state(self._state).set_value(value)
