@@ -79,10 +79,13 @@ def joint_plot(
     title: str = "",
     tau_label: str = "τ commanded",
     extra_tau: Sequence[tuple[np.ndarray, str]] = (),
+    marks: Sequence[tuple[float, str]] = (),
 ) -> Figure:
     """Three panels for one joint (1-based): q and q_d, tracking error, torque.
 
-    Saved to ``path`` when given; the figure is returned either way.
+    ``marks`` are (time, label) of the monitor's events (replans, repeats, skips): a
+    vertical line through every panel, labelled on the top one. Saved to ``path`` when
+    given; the figure is returned either way.
     """
     j = joint - 1
     spans = phase_spans(t, phase)
@@ -107,6 +110,13 @@ def joint_plot(
     ax.set_ylabel(f"joint {joint} torque [N·m]")
     ax.set_xlabel("time [s]")
     ax.legend(loc="lower right", fontsize=8)
+    for when, label in marks:
+        for a in axes:
+            a.axvline(when, color="tab:purple", lw=1.2, ls=":")
+        axes[0].annotate(
+            label, (when, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -10),
+            textcoords="offset points", fontsize=8, color="tab:purple",
+        )  # fmt: skip
     if title:
         fig.suptitle(title, y=0.99, fontsize=11)
     phase_key(fig)

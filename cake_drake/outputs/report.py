@@ -145,6 +145,7 @@ def write_outputs(
         extra_tau=[
             (gravity_torques(cake.scene.control_plant, logs.q), "g(q): static gravity term")
         ],
+        marks=[(e["time_s"], e["kind"]) for e in execution.monitoring.get("events", [])],
     )
     try:
         write_plan(plan, out.path("plan.txt"))

@@ -35,7 +35,7 @@ def _tilt(X: RigidTransform) -> float:
 
 
 #: A cube whose centre is this close to the grasp frame, between closed fingers, is held.
-HELD_TOL = 0.012  # m
+HELD_TOL = 0.025  # m (a cube may sit off-centre between the pads)
 #: Finger opening (each finger, m) that says the fingers are closed on a 4 cm cube.
 GRIP_RANGE = (0.012, 0.026)
 

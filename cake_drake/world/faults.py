@@ -5,8 +5,8 @@ A scenario's ``faults:`` list (``--fault SPEC`` on the command line, repeatable)
 * ``!Slip {action: K}`` (``slip:K``) - during the K-th executed action the fingers let go
   of the cube they carry (in its lift or transport phase);
 * ``!Knock {cube: C, time: T}`` (``knock:C@T``) - at simulated time T a short horizontal
-  push (through the plant's external-force input), away from the robot, knocks C over
-  and whatever stands on it;
+  push at C's centre (0.8 N for 0.1 s, through the plant's external-force input),
+  towards the robot: C slides out and whatever stands on it falls;
 * ``!Move {cube: C, time: T, x: X, y: Y}`` (``move:C@T:X,Y``) - at time T, C is taken
   away and set down on the table at (X, Y) in the world frame, as a person would;
 * ``!RandomFault {seed: S}`` (``random:S``) - one of the above, its kind, cube, time or
@@ -46,7 +46,7 @@ class Slip:
 class Knock:
     cube: str = ""
     time: float = 0.0  # s, simulated
-    force: float = 0.6  # N, horizontal, away from the robot's base (the cube weighs 0.5 N)
+    force: float = 0.8  # N, horizontal, towards the robot (the cube weighs 0.5 N)
     duration: float = 0.1  # s
 
 
@@ -190,10 +190,12 @@ class Pusher(LeafSystem):
         for body, start, duration, force in self._pushes:
             if start <= t < start + duration:
                 p = self._poses.Eval(context)[body].translation()
-                away = np.array([p[0], p[1], 0.0]) / max(np.hypot(p[0], p[1]), 1e-9)
+                # Towards the robot: what falls lands in front of the towers, within reach
+                # and away from the neighbouring slots (sideways it would fall onto them).
+                away = -np.array([p[0], p[1], 0.0]) / max(np.hypot(p[0], p[1]), 1e-9)
                 f = ExternallyAppliedSpatialForce()
                 f.body_index = BodyIndex(body)
-                f.p_BoBq_B = [0.0, 0.0, 0.015]  # near the top face: it tips as well as slides
+                f.p_BoBq_B = np.zeros(3)  # at its centre: it slides out, what stands on it falls
                 f.F_Bq_W = SpatialForce(np.zeros(3), force * away)
                 out.append(f)
         output.set_value(out)
@@ -206,4 +208,4 @@ def move_cube(plant, plant_context, body, x: float, y: float) -> None:
     )
     from pydrake.multibody.math import SpatialVelocity
 
-    plant.SetFreeBodySpatialVelocity(body, SpatialVelocity(np.zeros(3), np.zeros(3)), plant_context)
+    plant.SetFreeBodySpatialVelocity(plant_context, body, SpatialVelocity(np.zeros(3), np.zeros(3)))

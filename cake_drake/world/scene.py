@@ -221,42 +221,52 @@ def add_world(
     return Scene(plant, scene_graph, arm, hand, cubes)
 
 
-#: Where the cube model's eight support spheres sit (its bottom and top faces, 8 mm in
-#: from the edges); :func:`_add_side_supports` gives the four side faces the same.
-_SUPPORT_IN, _SUPPORT_OUT = 0.012, 0.018
+#: The model's eight support spheres sit 8 mm in from the edges of the bottom and top
+#: faces, reaching to those faces. :func:`_add_side_supports` gives the side faces the
+#: same, recessed a little (x faces 0.5 mm, y faces 1 mm): with every face's spheres
+#: reaching its plane, a cube rolling over an edge could come to rest balanced on it, on
+#: the two rows of spheres either side; recessed by different amounts it always falls
+#: onto the face whose spheres reach farthest.
+_SUPPORT_IN = 0.012
+_SIDE_REACH = (0.0175, 0.0170)  # sphere centres, x faces and y faces (radius 2 mm)
 
 
 def _add_side_supports(plant: MultibodyPlant, body) -> None:
-    """Support spheres for the four side faces, like those the model has on top and bottom.
+    """Support spheres for the four side faces (see :data:`_SIDE_REACH`).
 
     A cube knocked over lands on a side face; with spheres only on its top and bottom it
     would sink into the table to its spheres (6 mm) and read as resting on nothing.
     """
-    from pydrake.geometry import Sphere
+    from pydrake.geometry import ProximityProperties, Sphere
+    from pydrake.multibody.plant import CoulombFriction
 
-    props = _support_properties()  # the model's: mu 1, stiffness 1e6, dissipation 5
-    for axis in (0, 1):
+    props = ProximityProperties()  # the model's support spheres': mu 1, stiff, damped
+    props.AddProperty("material", "coulomb_friction", CoulombFriction(1.0, 1.0))
+    props.AddProperty("material", "point_contact_stiffness", 1e6)
+    props.AddProperty("material", "hunt_crossley_dissipation", 5.0)
+    # Edge spheres: a cube rolling over an edge would otherwise come to rest on the rows
+    # of inset spheres either side of it, as on a chamfer; with a sphere on each edge it
+    # balances on a line and falls onto a face, as a sharp-edged cube does. They touch
+    # the table only (see _filter_cube_collisions), so stacking is unchanged.
+    e = 0.018
+    for i, (u, v) in enumerate(((0, 1), (0, 2), (1, 2))):
+        for su in (-e, e):
+            for sv in (-e, e):
+                p = [0.0, 0.0, 0.0]
+                p[u], p[v] = su, sv
+                name = f"edge_{i}{int(su > 0)}{int(sv > 0)}"
+                plant.RegisterCollisionGeometry(body, RigidTransform(p), Sphere(0.002), name, props)
+    for axis, reach in enumerate(_SIDE_REACH):
         for sign in (-1.0, 1.0):
             for a in (-_SUPPORT_IN, _SUPPORT_IN):
                 for b in (-_SUPPORT_IN, _SUPPORT_IN):
-                    p = [0.0, 0.0, 0.0]
-                    p[axis] = sign * _SUPPORT_OUT
-                    p[1 - axis], p[2] = a, b
+                    p = [a, a, b]
+                    p[axis] = sign * reach
+                    p[1 - axis] = a
                     name = f"corner_side_{axis}{int(sign > 0)}{int(a > 0)}{int(b > 0)}"
                     plant.RegisterCollisionGeometry(
                         body, RigidTransform(p), Sphere(0.002), name, props
                     )
-
-
-def _support_properties():
-    from pydrake.geometry import ProximityProperties
-    from pydrake.multibody.plant import CoulombFriction
-
-    props = ProximityProperties()
-    props.AddProperty("material", "coulomb_friction", CoulombFriction(1.0, 1.0))
-    props.AddProperty("material", "point_contact_stiffness", 1e6)
-    props.AddProperty("material", "hunt_crossley_dissipation", 5.0)
-    return props
 
 
 def _filter_robot_collisions(plant, scene_graph, arm, hand) -> None:
@@ -287,18 +297,29 @@ def _filter_cube_collisions(plant, scene_graph, cubes) -> None:
     the box), and boxes never touch boxes.
     """
     inspector = scene_graph.model_inspector()
-    faces, corners = GeometrySet(), GeometrySet()
+    faces, corners, edges = GeometrySet(), GeometrySet(), GeometrySet()
     for instance in cubes.values():
         body = plant.GetBodyByName("cube", instance)
         for gid in plant.GetCollisionGeometriesForBody(body):
-            is_corner = inspector.GetName(gid).rsplit("::", 1)[-1].startswith("corner")
-            (corners if is_corner else faces).Add(gid)
+            name = inspector.GetName(gid).rsplit("::", 1)[-1]
+            group = (
+                corners
+                if name.startswith("corner")
+                else edges
+                if name.startswith("edge")
+                else faces
+            )
+            group.Add(gid)
     table = plant.GetBodyByName("table_top", plant.GetModelInstanceByName("table"))
     table_set = GeometrySet(plant.GetCollisionGeometriesForBody(table))
     manager = scene_graph.collision_filter_manager()
     manager.Apply(CollisionFilterDeclaration().ExcludeWithin(corners))
     manager.Apply(CollisionFilterDeclaration().ExcludeWithin(faces))
     manager.Apply(CollisionFilterDeclaration().ExcludeBetween(faces, table_set))
+    # Edge spheres keep a fallen cube off its edges on the table and nothing else.
+    manager.Apply(CollisionFilterDeclaration().ExcludeWithin(edges))
+    manager.Apply(CollisionFilterDeclaration().ExcludeBetween(edges, faces))
+    manager.Apply(CollisionFilterDeclaration().ExcludeBetween(edges, corners))
 
 
 def make_control_plant(time_step: float = 0.0) -> MultibodyPlant:

@@ -1,0 +1,99 @@
+"""The closed loop: every fault kind is recovered with the monitor and fails without it."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cake_drake.pipeline import run
+from cake_drake.scenario import Knock, Move, Scenario, Slip
+from cake_drake.symbolic import random_problem
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: On problem_5 (a-b-c and d-e restacked into a-b-c-d-e): c slips while carried to d;
+#: d is pushed off e before either is touched; c is taken off d once it is there.
+FAULTS_5 = {
+    "slip": Slip(6),
+    "knock": Knock("d", 1.0),
+    "move": Move("c", 12.0, 0.5, -0.3),
+}
+
+
+def _scenario(fault, monitor: bool, problem=None) -> Scenario:
+    s = Scenario(faults=[fault])
+    s.reference.action_source = "monitor" if monitor else "plan"
+    if problem is not None:
+        s.task.problem = str(problem)
+    return s
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", FAULTS_5)
+def test_each_fault_kind_is_recovered_with_the_monitor_and_not_without(kind):
+    closed = run(_scenario(FAULTS_5[kind], True), write=False)
+    assert closed.success, closed.message
+    assert closed.execution.monitoring["events"], "the monitor saw nothing"
+    facts = closed.execution.reading.facts
+    assert {("on", "a", "b"), ("on", "b", "c"), ("on", "c", "d"), ("on", "d", "e")} <= facts
+    opened = run(_scenario(FAULTS_5[kind], False), write=False)
+    assert not opened.success, f"open loop reached the goal despite {kind}"
+
+
+@pytest.mark.slow
+def test_a_generated_six_block_problem_recovers_from_a_moved_cube(tmp_path):
+    problem = tmp_path / "p6.pddl"
+    problem.write_text(random_problem(6, seed=1))
+    base = run(_scenario(Slip(1), True, problem), write=False)
+    assert base.success, base.message
+    # The cube the plan stacks first is moved away right after it is set down.
+    first_stack = next(a for a in base.plan.actions if a.name == "stack")
+    fault = Move(first_stack.args[0], 0.0, 0.45, -0.35)
+    k = base.plan.actions.index(first_stack)
+    fault.time = round(float(base.execution.logs.t[base.execution.logs.action == k][-1]) + 0.5, 2)
+    closed = run(_scenario(fault, True, problem), write=False)
+    assert closed.success, closed.message
+    assert not run(_scenario(fault, False, problem), write=False).success
+
+
+@pytest.mark.slow
+def test_the_summary_and_the_message_tell_the_recovery(tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--quiet", "--no-render", "--out", str(tmp_path),
+         "--fault", "move:c@12:0.5,-0.3"],
+        capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "recovered after 1 disagreement" in r.stdout
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    event = summary["events"][0]
+    assert event["kind"] in ("repeat", "replan") and "(on c d)" in event["missing"]
+    assert summary["faults"] == [{"kind": "Move", "cube": "c", "time": 12.0, "x": 0.5, "y": -0.3}]
+    assert len(summary["executed"]) > len(summary["plan"])
+
+
+@pytest.mark.parametrize(
+    "spec, words",
+    [
+        ("wobble:3", "unknown kind 'wobble'"),
+        ("slip:x", "cannot read it"),
+        ("knock:z@1", "no such cube"),
+        ("knock:a@-1", "times are >= 0"),
+        ("slip:99", "the plan has actions 1 to 10"),
+        ("move:a@1:5,5", "not on the table"),
+        ("move:a@1:0.1,0", "of the robot's base"),
+    ],
+)
+def test_bad_fault_specs_are_refused_before_simulating(tmp_path, spec, words):
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--quiet", "--fault", spec,
+         "--out", str(tmp_path / "o")],
+        capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()
