@@ -9,6 +9,7 @@ from pydrake.math import RollPitchYaw
 
 from cake_drake.geometric.trajectory import save_npz
 from cake_drake.outputs.files import OutputDir
+from cake_drake.outputs.replay import write_replay
 from cake_drake.outputs.worker import OutputWorker
 from cake_drake.scenario import dump_scenario
 from cake_drake.symbolic import fact_str, write_plan
@@ -146,9 +147,7 @@ def write_outputs(
     samples, actions = trajectory_samples(cake, execution)
     save_npz(out.path("trajectory.npz"), samples, actions)
     if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        out.path("replay.html").write_text(meshcat.StaticHtml())
+        write_replay(meshcat, out.path("replay.html"))
     worker.wait()
     stages["outputs"] = time.perf_counter() - t0
     out.write_json("summary.json", summary(result))
