@@ -1,11 +1,47 @@
 # Two entry points: `make run` (the main job) and `make test` (the test suite).
-# Each creates or refreshes .venv from pyproject.toml first.
+# Each first makes sure the Debian packages it needs (system-packages.txt) are installed,
+# then creates or refreshes .venv from pyproject.toml.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+SYSTEM_PACKAGES := system-packages.txt
 
-.PHONY: run test lint bench clean venv
+.PHONY: run test lint bench clean venv system-packages-run system-packages-test
+
+# $(call ensure_packages,GOAL,GOALS): install the Debian packages system-packages.txt lists
+# for any of GOALS that are missing: as root, or with password-less sudo; otherwise stop at
+# once with the apt-get line to run. Without dpkg (not Debian) it only names them.
+define ensure_packages
+@want=$$(sed 's/#.*//' $(SYSTEM_PACKAGES) | awk -v goals=' $(2) ' \
+	  'NF >= 2 && index(goals, " " $$2 " ") { print $$1 }'); \
+if ! command -v dpkg-query >/dev/null 2>&1; then \
+	echo "note: not a Debian system; make $(1) needs the equivalents of: $$want" >&2; \
+	exit 0; \
+fi; \
+missing=""; \
+for p in $$want; do \
+	dpkg-query -W -f='$${Status}\n' "$$p" 2>/dev/null | grep -qx 'install ok installed' \
+	  || missing="$$missing $$p"; \
+done; \
+missing=$${missing# }; \
+[ -z "$$missing" ] && exit 0; \
+if [ "$$(id -u)" = 0 ]; then sudo=""; \
+elif command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then sudo="sudo"; \
+else \
+	echo "error: make $(1) needs Debian packages that are not installed; run: sudo apt-get update && sudo apt-get install -y $$missing" >&2; \
+	exit 1; \
+fi; \
+echo "make $(1): installing Debian packages: $$missing"; \
+$$sudo apt-get update -qq && \
+$$sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing >/dev/null
+endef
+
+system-packages-run:
+	$(call ensure_packages,run,run)
+
+system-packages-test:
+	$(call ensure_packages,test,run test)
 
 $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
@@ -17,16 +53,16 @@ $(STAMP): pyproject.toml | $(VENV)/bin/python
 
 venv: $(STAMP)
 
-run: $(STAMP)
+run: system-packages-run $(STAMP)
 	$(PY) -m cake_drake.run --mode torque
 
-test: $(STAMP)
+test: system-packages-test $(STAMP)
 	$(PY) -m pytest
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
 
-bench: $(STAMP)
+bench: system-packages-run $(STAMP)
 	$(PY) benchmarks/planning.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/run.py

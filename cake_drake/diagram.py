@@ -237,9 +237,9 @@ def build_diagram(
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
     if meshcat is not None:
-        from pydrake.visualization import AddDefaultVisualization
+        from cake_drake.outputs.replay import add_visualization
 
-        AddDefaultVisualization(builder, meshcat)
+        add_visualization(builder, scene.scene_graph, meshcat)
     diagram = builder.Build()
     diagram.set_name("cake_drake")
     return CakeDiagram(diagram, scene, scenario, reference, controller, loggers, solver)

@@ -327,7 +327,9 @@ def run(
             len(names), lambda k: f"({names[k]})" if k < len(names) else "", enabled=not quiet
         )
         if meshcat is not None:
-            meshcat.StartRecording()
+            from cake_drake.outputs.replay import start_recording
+
+            start_recording(meshcat)
         sim = scenario.simulation
         moves = [f for f in faults if isinstance(f, Move)]
         execution = execute(cake, sim.max_sim_s, sim.settle_s, progress=progress, moves=moves)

@@ -10,6 +10,7 @@ from pydrake.math import RollPitchYaw
 from cake_drake.errors import InputError, OutputError
 from cake_drake.geometric.trajectory import save_npz
 from cake_drake.outputs.files import OutputDir
+from cake_drake.outputs.replay import write_replay
 from cake_drake.outputs.worker import OutputWorker
 from cake_drake.scenario import dump_scenario
 from cake_drake.symbolic import fact_str, write_plan
@@ -155,9 +156,10 @@ def write_outputs(
     except (OSError, InputError) as e:
         raise OutputError(f"{out.out}: cannot write the outputs ({e})") from None
     if meshcat is not None:
-        meshcat.StopRecording()
-        meshcat.PublishRecording()
-        out.path("replay.html").write_text(meshcat.StaticHtml())
+        try:
+            write_replay(meshcat, out.path("replay.html"))
+        except OSError as e:
+            raise OutputError(f"{out.out}: cannot write replay.html ({e})") from None
     try:
         worker.wait()
     except RuntimeError as e:

@@ -38,14 +38,14 @@ def show_problem(
 def _show_in_meshcat(blocks: Sequence[str], poses: dict[str, RigidTransform]) -> None:
     from pydrake.geometry import StartMeshcat
     from pydrake.systems.framework import DiagramBuilder
-    from pydrake.visualization import AddDefaultVisualization
+    from cake_drake.outputs.replay import add_visualization
 
     from cake_drake.world.scene import WorldConfig, add_world
 
     meshcat = StartMeshcat()
     builder = DiagramBuilder()
-    add_world(builder, blocks, WorldConfig(time_step=0.0), initial_poses=poses)
-    AddDefaultVisualization(builder, meshcat)
+    scene = add_world(builder, blocks, WorldConfig(time_step=0.0), initial_poses=poses)
+    add_visualization(builder, scene.scene_graph, meshcat)
     diagram = builder.Build()
     diagram.ForcedPublish(diagram.CreateDefaultContext())
     print(f"Meshcat at {meshcat.web_url()}")

@@ -16,8 +16,10 @@ meshes, and write:
 * ``panda_hand_welded.urdf``: the same hand with the fingers fixed, for the 7-DOF
   control plant that ``InverseDynamicsController`` needs (it rejects unactuated DOFs).
 
-Meshes are referenced as ``package://pybullet_franka_panda/meshes/...``; the world layer
-maps that package to the ``pybullet_data`` wheel's folder at run time (no download).
+Collision meshes are referenced as ``package://pybullet_franka_panda/meshes/...``; the
+world layer maps that package to the ``pybullet_data`` wheel's folder at run time (no
+download). Visual meshes are compact copies kept in ``meshes/`` here (see
+:func:`write_visual_meshes`): the wheel's own do not load in a browser's Meshcat.
 """
 
 from __future__ import annotations
@@ -53,14 +55,14 @@ JOINTS = [
     ((0.088, 0, 0),      (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0, 20.0),
 ]  # fmt: skip
 
-# Visual meshes: the detailed ones where the wheel has them. Links 0 and 7 have none; their
-# collision meshes name a material file the wheel lacks (a warning on every load), so a
-# copy without that line is kept in meshes/ here (Apache-2.0, as the wheel's LICENSE.txt).
+# Visual meshes, all kept in meshes/ here (Apache-2.0, as the wheel's LICENSE.txt). Links 0
+# and 7 have no detailed mesh in the wheel: their collision meshes serve, copied without the
+# material file they name and the wheel lacks (a warning on every load). The others are
+# the wheel's detailed meshes rewritten by write_visual_meshes().
 OWN_MESHES = HERE / "meshes"
-VISUAL = {
-    "link0": "package://cake_drake/panda/meshes/link0.obj",
-    "link7": "package://cake_drake/panda/meshes/link7.obj",
-}
+PLAIN = ("link0", "link7")
+DETAILED = ("link1", "link2", "link3", "link4", "link5", "link6", "hand", "finger")
+VISUAL = {name: f"package://cake_drake/panda/meshes/{name}.obj" for name in PLAIN + DETAILED}
 
 FINGER_ORIGIN_Z = 0.0584  # finger frames above the hand frame
 FINGER_TRAVEL = 0.04  # each finger, m
@@ -92,11 +94,9 @@ def inertial(name: str) -> str:
 
 
 def visual(name: str, rpy: str = "0 0 0") -> str:
-    mesh = VISUAL.get(name, f"{PKG}/visual/{name}.obj")
+    mesh = VISUAL[name]
     colour = (
-        ""
-        if name not in VISUAL
-        else '      <material><color rgba="0.95 0.95 0.95 1"/></material>\n'
+        '      <material><color rgba="0.95 0.95 0.95 1"/></material>\n' if name in PLAIN else ""
     )
     return (
         f'    <visual>\n      <origin xyz="0 0 0" rpy="{rpy}"/>\n'
@@ -108,10 +108,99 @@ def visual(name: str, rpy: str = "0 0 0") -> str:
 def copy_plain_meshes() -> None:
     """Copy the collision meshes that serve as visuals, minus their dangling ``mtllib``."""
     OWN_MESHES.mkdir(exist_ok=True)
-    for name in VISUAL:
+    for name in PLAIN:
         lines = (MESHES / "collision" / f"{name}.obj").read_text().splitlines(keepends=True)
         kept = [line for line in lines if not line.startswith(("mtllib", "usemtl"))]
         (OWN_MESHES / f"{name}.obj").write_text("".join(kept))
+
+
+def write_visual_meshes(decimals: int = 4) -> None:
+    """Rewrite the wheel's detailed visual meshes so that every viewer draws them, compactly.
+
+    Meshcat's browser viewer merges the parts of an OBJ into one geometry and draws nothing
+    when the parts differ in their attributes: in the wheel's ``hand``, ``link5`` and
+    ``link6`` some parts have texture coordinates and others none, and two have stray line
+    elements, so those three were missing from every Meshcat view and replay. Each copy here
+    has triangles with normals only (Drake's VTK renderer needs normals), positions to
+    ``decimals`` places (0.1 mm by default), normals to 3, one part per colour, and
+    no texture: the texture (``colors.png``) is a white sheet with one grey decal, so each
+    face's texel is baked into its part's diffuse colour. About half the original size.
+    """
+    import matplotlib.image
+
+    OWN_MESHES.mkdir(exist_ok=True)
+    texture = matplotlib.image.imread(MESHES / "visual" / "colors.png")[..., :3]
+    decal = texture.min(axis=2) < 0.8
+    decal_rgb = texture[decal].mean(axis=0)
+    h, w = decal.shape
+
+    def number(x: float, places: int) -> str:
+        text = f"{round(x, places) + 0.0:.{places}f}".rstrip("0").rstrip(".")
+        return "0" if text in ("", "-0") else text
+
+    for name in DETAILED:
+        materials = _read_mtl(MESHES / "visual" / f"{name}.mtl")
+        positions: list[str] = []
+        uvs: list[tuple[float, float]] = []
+        normal_ids: dict[str, int] = {}  # rounded normal -> its new 1-based index
+        renumber: list[int] = []  # old normal index - 1 -> new index
+        faces: dict[tuple[float, ...], list[str]] = {}
+        material = ((1.0, 1.0, 1.0), False)
+        for line in (MESHES / "visual" / f"{name}.obj").read_text().splitlines():
+            tag, _, rest = line.partition(" ")
+            if tag == "v":
+                positions.append("v " + " ".join(number(float(x), decimals) for x in rest.split()))
+            elif tag == "vn":
+                key = " ".join(number(float(x), 3) for x in rest.split())
+                renumber.append(normal_ids.setdefault(key, len(normal_ids) + 1))
+            elif tag == "vt":
+                u, v = (float(x) for x in rest.split()[:2])
+                uvs.append((u, v))
+            elif tag == "usemtl":
+                material = materials[rest.strip()]
+            elif tag == "f":
+                corners = [c.split("/") for c in rest.split()]
+                kd, textured = material
+                rgb = kd
+                if textured and all(len(c) > 1 and c[1] for c in corners):
+                    u, v = np.mean([uvs[int(c[1]) - 1] for c in corners], axis=0)
+                    row = min(h - 1, max(0, int((1.0 - v) * h)))
+                    col = min(w - 1, max(0, int(u * w)))
+                    if decal[row, col]:
+                        rgb = tuple(k * t for k, t in zip(kd, decal_rgb, strict=True))
+                key = tuple(round(float(x), 3) for x in rgb)
+                face = " ".join(f"{c[0]}//{renumber[int(c[2]) - 1]}" for c in corners)
+                faces.setdefault(key, []).append("f " + face)
+            # "l" (stray line elements), "o", "g", "s" and comments: dropped.
+        source = f"pybullet_data/franka_panda/meshes/visual/{name}"
+        mtl = [f"# {name}: the colours of {source}.mtl, texture baked in"]
+        obj = [
+            f"# {name}: {source}.obj rewritten by models/panda/generate_urdf.py",
+            f"mtllib {name}.mtl",
+            *positions,
+            *(f"vn {n}" for n in normal_ids),
+        ]
+        for k, (rgb, lines) in enumerate(sorted(faces.items(), reverse=True)):
+            mtl += [f"newmtl {name}_{k}", "Kd " + " ".join(f"{x:.3f}" for x in rgb)]
+            obj += [f"o {name}_{k}", f"usemtl {name}_{k}", *lines]
+        (OWN_MESHES / f"{name}.mtl").write_text("\n".join(mtl) + "\n")
+        (OWN_MESHES / f"{name}.obj").write_text("\n".join(obj) + "\n")
+
+
+def _read_mtl(path: Path) -> dict[str, tuple[tuple[float, ...], bool]]:
+    """Material name -> (diffuse colour, textured?) from an MTL file."""
+    out: dict[str, tuple[tuple[float, ...], bool]] = {}
+    name = None
+    for line in path.read_text().splitlines():
+        tag, _, rest = line.strip().partition(" ")
+        if tag == "newmtl":
+            name = rest.strip()
+            out[name] = ((1.0, 1.0, 1.0), False)
+        elif tag == "Kd" and name:
+            out[name] = (tuple(float(x) for x in rest.split()), out[name][1])
+        elif tag == "map_Kd" and name:
+            out[name] = (out[name][0], True)
+    return out
 
 
 def convex_collision(name: str) -> str:
@@ -203,6 +292,7 @@ def hand(fingers_move: bool) -> str:
 
 def main() -> None:
     copy_plain_meshes()
+    write_visual_meshes()
     (HERE / "panda_arm.urdf").write_text(arm())
     (HERE / "panda_hand.urdf").write_text(hand(fingers_move=True))
     (HERE / "panda_hand_welded.urdf").write_text(hand(fingers_move=False))

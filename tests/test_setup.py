@@ -1,0 +1,285 @@
+"""The first contact: system-packages.txt and the Makefile that installs it.
+
+Every external program the project runs (``subprocess``, ``shutil.which``, ``os.system``,
+notebook ``!`` lines) must come from a package listed in system-packages.txt or be the
+venv's own Python, so that `make run` / `make test` on a bare machine bring it in. The
+Makefile's package step is run here against stand-ins for dpkg-query, id, sudo and apt-get.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import shlex
+import shutil
+import stat
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES_FILE = ROOT / "system-packages.txt"
+SOURCES = ("cake_drake", "tests", "benchmarks", "examples", "models")
+VENV = "the venv's Python"
+
+RUNNERS = {
+    ("subprocess", name) for name in ("run", "Popen", "call", "check_call", "check_output")
+} | {("os", "system"), ("shutil", "which"), ("asyncio", "create_subprocess_exec")}
+RUNNERS |= {("os", name) for name in ("execv", "execvp", "execl", "execlp", "spawnv", "spawnvp")}
+
+
+@dataclass(frozen=True)
+class Entry:
+    package: str
+    goal: str
+    programs: tuple[str, ...]
+
+
+def read_packages(path: Path = PACKAGES_FILE) -> list[Entry]:
+    entries = []
+    for line in path.read_text().splitlines():
+        fields = line.split("#", 1)[0].split()
+        if fields:
+            entries.append(Entry(fields[0], fields[1], tuple(fields[2:])))
+    return entries
+
+
+# --- which programs does the code run? --------------------------------------------------
+
+
+def _runner(call: ast.Call, aliases: dict[str, tuple[str, str]]) -> bool:
+    f = call.func
+    if isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name):
+        return (f.value.id, f.attr) in RUNNERS
+    return isinstance(f, ast.Name) and aliases.get(f.id) in RUNNERS
+
+
+class _Programs(ast.NodeVisitor):
+    """Collects (line, program or None when it cannot be told) for every runner call."""
+
+    def __init__(self, tree: ast.Module):
+        self.found: list[tuple[int, str | None]] = []
+        self.aliases = {
+            alias.asname or alias.name: (node.module, alias.name)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.ImportFrom) and node.module
+            for alias in node.names
+        }
+        self.scopes: list[ast.AST] = [tree]
+
+    def visit_FunctionDef(self, node):
+        self.scopes.append(node)
+        self.generic_visit(node)
+        self.scopes.pop()
+
+    visit_AsyncFunctionDef = visit_FunctionDef
+
+    def visit_Call(self, node: ast.Call):
+        if _runner(node, self.aliases) and node.args:
+            for program in self.program(node.args[0], depth=0):
+                self.found.append((node.lineno, program))
+        self.generic_visit(node)
+
+    def program(self, e: ast.AST, depth: int) -> list[str | None]:
+        """What ``e`` (a runner's first argument) names as the program to run."""
+        if depth > 5:
+            return [None]
+        if any(
+            isinstance(n, ast.Attribute) and n.attr == "executable" and getattr(n.value, "id", "")
+            == "sys" for n in ast.walk(e)
+        ):  # fmt: skip
+            return [VENV]
+        if isinstance(e, ast.Constant) and isinstance(e.value, str):
+            return [shlex.split(e.value)[0] if e.value.strip() else None]
+        if isinstance(e, (ast.List, ast.Tuple)) and e.elts:
+            return self.program(e.elts[0], depth + 1)
+        if isinstance(e, ast.Starred):
+            return self.program(e.value, depth + 1)
+        if isinstance(e, ast.BinOp):
+            return self.program(e.left, depth + 1)
+        if isinstance(e, ast.Call):
+            if _runner(e, self.aliases):
+                return []  # a shutil.which(...) result: that call is checked itself
+            if isinstance(e.func, ast.Name) and e.func.id in ("str", "Path") and e.args:
+                return self.program(e.args[0], depth + 1)
+        if isinstance(e, ast.Name):
+            values = self.values_of(e.id)
+            return [p for v in values for p in self.program(v, depth + 1)] if values else [None]
+        return [None]
+
+    def values_of(self, name: str) -> list[ast.AST]:
+        """What ``name`` is bound to in the enclosing function and the module."""
+        found: list[ast.AST] = []
+        for scope in reversed(self.scopes):
+            if isinstance(scope, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                args = scope.args
+                positional = args.posonlyargs + args.args
+                defaults = dict(
+                    zip([a.arg for a in positional[::-1]], args.defaults[::-1], strict=False)
+                )
+                defaults |= {
+                    a.arg: d
+                    for a, d in zip(args.kwonlyargs, args.kw_defaults, strict=True)
+                    if d is not None
+                }
+                if name in defaults:
+                    found.append(defaults[name])
+            for node in ast.walk(scope):
+                if isinstance(node, ast.Assign) and any(
+                    isinstance(t, ast.Name) and t.id == name for t in node.targets
+                ):
+                    found.append(node.value)
+                elif isinstance(node, ast.AnnAssign) and getattr(node.target, "id", "") == name:
+                    if node.value is not None:
+                        found.append(node.value)
+            if found:
+                return found
+        return found
+
+
+def programs_in_python(source: str) -> list[tuple[int, str | None]]:
+    tree = ast.parse(source)
+    visitor = _Programs(tree)
+    visitor.visit(tree)
+    return visitor.found
+
+
+def programs_run() -> dict[str, list[str]]:
+    """Program -> where it is run (``path:line``); ``None`` for a program not told."""
+    where: dict[str, list[str]] = {}
+    files = [p for d in SOURCES for p in sorted((ROOT / d).rglob("*.py"))]
+    for path in files:
+        for line, program in programs_in_python(path.read_text()):
+            where.setdefault(program, []).append(f"{path.relative_to(ROOT)}:{line}")
+    for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        for k, cell in enumerate(json.loads(nb.read_text())["cells"]):
+            if cell["cell_type"] != "code":
+                continue
+            code = "".join(cell["source"])
+            shell = [ln.strip()[1:] for ln in code.splitlines() if ln.strip().startswith("!")]
+            python = "\n".join("" if ln.strip().startswith(("!", "%")) else ln
+                               for ln in code.splitlines())  # fmt: skip
+            found = [(0, shlex.split(s)[0]) for s in shell if s.strip()]
+            found += programs_in_python(python)
+            for _, program in found:
+                where.setdefault(program, []).append(f"{nb.relative_to(ROOT)} cell {k}")
+    return where
+
+
+def test_every_program_the_code_runs_comes_from_a_listed_package():
+    listed = {program for entry in read_packages() for program in entry.programs}
+    where = programs_run()
+    unknown = {p: w for p, w in where.items() if p is not None and p != VENV and p not in listed}
+    assert not unknown, (
+        f"programs run but not provided by a package in {PACKAGES_FILE.name}: {unknown}"
+    )
+    untold = where.get(None, [])
+    assert not untold, f"cannot tell which program these run (name it in a constant): {untold}"
+
+
+def test_the_scan_finds_the_programs_we_know_of():
+    where = programs_run()
+    assert "dot" in where and "chromium" in where and VENV in where
+
+
+def test_the_scan_reads_through_names_defaults_and_which():
+    source = (
+        "import shutil, subprocess, sys\n"
+        "TOOL = 'convert'\n"
+        "def f(dot='dot'):\n"
+        "    exe = shutil.which(dot)\n"
+        "    subprocess.run([exe, '-Tsvg'])\n"
+        "    subprocess.run([TOOL, 'x'])\n"
+        "    cmd = [sys.executable, '-m', 'x']\n"
+        "    subprocess.run(cmd + ['y'])\n"
+        "    subprocess.run('ffmpeg -i a', shell=True)\n"
+        "    subprocess.run(make_command())\n"
+    )
+    assert [p for _, p in programs_in_python(source)] == [
+        "dot",
+        "convert",
+        VENV,
+        "ffmpeg",
+        None,
+    ]
+
+
+def test_the_package_list_is_well_formed():
+    entries = read_packages()
+    assert entries and all(e.goal in ("run", "test") for e in entries)
+    names = [e.package for e in entries]
+    assert len(names) == len(set(names)), "a package is listed twice"
+    assert {"graphviz", "chromium", "libegl1"} <= set(names)
+
+
+# --- the Makefile's package step, against stand-ins ---------------------------------------
+
+
+def _stub(folder: Path, name: str, body: str) -> None:
+    path = folder / name
+    path.write_text("#!/bin/sh\n" + body + "\n")
+    path.chmod(path.stat().st_mode | stat.S_IXUSR)
+
+
+def _make(goal: str, folder: Path, uid: int, installed: bool, sudo_ok: bool):
+    log = folder / "calls.log"
+    _stub(folder, "dpkg-query", "echo 'install ok installed'" if installed else "exit 1")
+    _stub(folder, "id", f"echo {uid}")
+    _stub(folder, "sudo", f'echo "sudo $*" >> {log}; ' + ('[ "$1" = -n ] && exit 0; "$@"'
+                                                         if sudo_ok else "exit 1"))  # fmt: skip
+    _stub(folder, "apt-get", f'echo "apt-get $*" >> {log}')
+    env = {**os.environ, "PATH": f"{folder}{os.pathsep}/usr/bin{os.pathsep}/bin"}
+    r = subprocess.run(
+        [shutil.which("make"), "-s", "-C", str(ROOT), goal],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    return r, (log.read_text() if log.exists() else "")
+
+
+@pytest.fixture
+def stubs(tmp_path):
+    if shutil.which("make") is None:
+        pytest.skip("make is not installed")
+    return tmp_path
+
+
+def test_missing_packages_without_root_stop_with_one_apt_get_line(stubs):
+    r, calls = _make("system-packages-test", stubs, uid=1000, installed=False, sudo_ok=False)
+    assert r.returncode != 0
+    ours = [ln for ln in r.stderr.splitlines() if not ln.startswith("make")]
+    assert len(ours) == 1, r.stderr
+    wanted = " ".join(e.package for e in read_packages())
+    assert ours[0].endswith(f"sudo apt-get install -y {wanted}"), ours[0]
+    assert "apt-get" not in calls
+
+
+def test_run_needs_only_the_run_packages(stubs):
+    r, _ = _make("system-packages-run", stubs, uid=1000, installed=False, sudo_ok=False)
+    line = r.stderr.splitlines()[0]
+    assert "libegl1" in line and "graphviz" not in line and "chromium" not in line
+
+
+def test_missing_packages_as_root_are_installed(stubs):
+    r, calls = _make("system-packages-test", stubs, uid=0, installed=False, sudo_ok=False)
+    assert r.returncode == 0, r.stderr
+    install = [ln for ln in calls.splitlines() if " install " in ln]
+    assert len(install) == 1
+    assert all(e.package in install[0].split() for e in read_packages())
+    assert "apt-get update" in calls and "sudo" not in calls
+
+
+def test_missing_packages_with_passwordless_sudo_are_installed_through_it(stubs):
+    r, calls = _make("system-packages-test", stubs, uid=1000, installed=False, sudo_ok=True)
+    assert r.returncode == 0, r.stderr
+    assert "sudo env DEBIAN_FRONTEND=noninteractive apt-get install" in calls
+
+
+def test_nothing_to_do_when_everything_is_installed(stubs):
+    r, calls = _make("system-packages-test", stubs, uid=1000, installed=True, sudo_ok=False)
+    assert r.returncode == 0 and r.stdout == "" and r.stderr == "" and calls == ""
