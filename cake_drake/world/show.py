@@ -38,8 +38,8 @@ def show_problem(
 def _show_in_meshcat(blocks: Sequence[str], poses: dict[str, RigidTransform]) -> None:
     from pydrake.geometry import StartMeshcat
     from pydrake.systems.framework import DiagramBuilder
-    from cake_drake.outputs.replay import add_visualization
 
+    from cake_drake.outputs.replay import add_visualization
     from cake_drake.world.scene import WorldConfig, add_world
 
     meshcat = StartMeshcat()
