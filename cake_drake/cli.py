@@ -237,10 +237,11 @@ def main_run(argv: list[str] | None = None) -> int:
     events = e.monitoring.get("events", [])
     if events:
         replans = e.monitoring.get("replans", 0)
-        rate = (
-            f"recovered after {len(events)} disagreement{'s' * (len(events) > 1)} with the plan "
-            f"({replans} replan{'s' * (replans != 1)}) — " + rate
+        told = (
+            f"{len(events)} disagreement{'s' * (len(events) > 1)} with the plan "
+            f"({replans} replan{'s' * (replans != 1)})"
         )
+        rate = (f"recovered after {told}" if result.success else f"after {told}") + " — " + rate
     where = f"outputs in {scenario.outputs.folder}/"
     if result.success:
         print(f"goal reached: {tower_text(e)} — {rate}; {where}")
