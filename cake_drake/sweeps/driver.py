@@ -188,5 +188,6 @@ def run_sweep(
     ordered = [rows[job["id"]] for job in jobs if job["id"] in rows]
     result = SweepResult(out, ordered, len(jobs), interrupted, skipped)
     result.written = write_table(ordered, out, columns=list(jobs[0]["params"]) if jobs else [])
-    result.written += write_plots(ordered, out / "plots", sweep.columns)
+    series = "case" if sweep.cases else None
+    result.written += write_plots(ordered, out / "plots", sweep.plot_axes, series)
     return result

@@ -10,11 +10,12 @@
       task.generate.blocks: [3, 4, 5]
       controller.kd: [[20], [5]]
     cases:                                  # optional: settings, each crossed with the grid
-      - {task.generate.style: exercise}
-      - {task.generate.style: ipc, task.domain: package://cake_drake/pddl/variants/blocksworld-ipc.pddl}
+      - {name: exercise, task.generate.style: exercise}
+      - {name: ipc, task.generate.style: ipc, task.domain: ../pddl/variants/blocksworld-ipc.pddl}
     seeds: 2                                # the scenario's seed: 0..N-1, or a list [0, 7]
     collect: [logs]                         # optional collectors run in the worker
 
+A case may have a ``name`` (the ``case`` column and the plots' legend; else its number).
 An axis names a scenario field by its dotted path (``world.time_step``, ``task.planner``,
 ``controller.kd``, ``seed``); every path is checked against the :class:`Scenario` tree
 and every value against the field's type before anything runs, and a bad one is one
@@ -70,6 +71,7 @@ class Sweep:
     base: Scenario = field(default_factory=Scenario)
     grid: list[tuple[str, list[yaml.Node]]] = field(default_factory=list)
     cases: list[list[Setting]] = field(default_factory=list)
+    case_names: list[str] = field(default_factory=list)
     seeds: list[int] | None = None
     collect: list[str] = field(default_factory=list)
     description: str = ""
@@ -100,7 +102,10 @@ class Sweep:
             sweep.grid.append((path, nodes))
         for case in cases or []:
             settings = []
+            sweep.case_names.append(str(case.get("name", len(sweep.case_names))))
             for path, value in case.items():
+                if path == "name":
+                    continue
                 field_type = check_path(path, base, f"{sweep.source}: cases")
                 node = _node(value)
                 _check_node(node, field_type, sweep.source, path)
@@ -114,7 +119,8 @@ class Sweep:
         """Every run, in order: cases, then the grid's combinations, then seeds."""
         out = []
         combos = list(itertools.product(*[[(p, v) for v in vs] for p, vs in self.grid]))
-        for case in self.cases or [[]]:
+        names = self.case_names or [None]
+        for name, case in zip(names, self.cases or [[]], strict=True):
             for combo in combos:
                 for seed in self.seeds if self.seeds is not None else [None]:
                     settings = list(case) + list(combo)
@@ -124,20 +130,28 @@ class Sweep:
                     for path, node in settings:
                         scenario = apply(scenario, path, node)
                     scenario = resolved(scenario, self.folder)
-                    params = {path: _label(getattr_path(scenario, path)) for path in self.columns}
+                    paths = [p for p in self.columns if p != "case"]
+                    params = {p: _label(getattr_path(scenario, p)) for p in paths}
+                    params = {"case": name, **params} if self.cases else params
                     out.append(Run(len(out), params, scenario))
         return out
 
     @property
     def columns(self) -> list[str]:
         """The parameter columns: every path a case, the grid or the seeds set."""
-        cols: list[str] = []
+        cols: list[str] = ["case"] if self.cases else [""]
         for case in self.cases:
             cols += [p for p, _ in case if p not in cols]
         cols += [p for p, _ in self.grid if p not in cols]
         if self.seeds is not None:
             cols.append("seed")
-        return cols
+        return [c for c in cols if c]
+
+    @property
+    def plot_axes(self) -> list[str]:
+        """What the plots put on x: each grid axis (the cases when there is no grid)."""
+        axes = [p for p, _ in self.grid if p != "seed"]
+        return axes or (["case"] if self.cases else [])
 
     def _check_unique(self) -> None:
         grid_paths = [p for p, _ in self.grid]
@@ -356,11 +370,16 @@ def parse_sweep(text: str, source: str = "<sweep>", folder: Path | None = None) 
             if not isinstance(case, yaml.MappingNode) or not case.value:
                 raise InputError(f"{_where(source, case)}: a case is a mapping of field: value")
             settings = []
+            name = str(len(sweep.case_names))
             for key_node, v in case.value:
+                if key_node.value == "name":
+                    name = str(_plain(v))
+                    continue
                 field_type = check_path(key_node.value, base, _where(source, key_node))
                 _check_node(v, field_type, source, key_node.value)
                 settings.append((key_node.value, v))
             sweep.cases.append(settings)
+            sweep.case_names.append(name)
     if "seeds" in entries:
         node = entries["seeds"]
         sweep.seeds = _seed_list(_plain(node), _where(source, node))

@@ -85,16 +85,23 @@ def _aggregate(rows: list[dict], metric: str, how: str) -> float:
     return sum(values) / len(values) if values else math.nan
 
 
-def write_plots(rows: list[dict], folder: Path, axes: list[str]) -> list[Path]:
-    """One figure per axis that varies (``seed`` is averaged over, never plotted)."""
-    varying = [a for a in axes if a != "seed" and len({_key(r.get(a)) for r in rows}) > 1]
+def write_plots(
+    rows: list[dict], folder: Path, axes: list[str], series: str | None = None
+) -> list[Path]:
+    """One figure per axis that varies (seeds are averaged over, never plotted); one line
+    per value of ``series`` (the cases), or else of the other axis when there are two."""
+    varying = [a for a in axes if a != "seed" and _distinct(rows, a) > 1]
+    if series is not None and (series in varying or not 1 < _distinct(rows, series) <= 8):
+        series = None
     written = []
     for axis in varying:
         others = [a for a in varying if a != axis]
-        series = others[0] if len(others) == 1 and _distinct(rows, others[0]) <= 6 else None
+        lines = series
+        if lines is None and len(others) == 1 and _distinct(rows, others[0]) <= 6:
+            lines = others[0]
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / f"{axis}.png"
-        axis_figure(rows, axis, series).savefig(path, dpi=100)
+        axis_figure(rows, axis, lines).savefig(path, dpi=100)
         written.append(path)
     return written
 
