@@ -32,7 +32,7 @@ from cake_drake.dynamic.analysis import settling
 from cake_drake.errors import ExecutionError, InputError, run_cli
 from cake_drake.execution import Logs
 from cake_drake.outputs.files import OutputDir
-from cake_drake.pipeline import run
+from cake_drake.pipeline import check, run
 from cake_drake.scenario import ComputedTorque, JointPd, Recorded, Scenario, resolve_path
 from cake_drake.sweeps import LocalPool, Sweep, run_sweep
 
@@ -99,6 +99,7 @@ def study(
     scenario.simulation.settle_s = FINAL_HOLD_S
     scenario.visualization.meshcat = False
     scenario.outputs.render = False
+    check(scenario, write=False)  # bad input is one line here, not a failed row per Kd
     sweep = Sweep.of(scenario, grid={"controller.kd": [[kd] for kd in kds]}, collect=["logs"])
     engine = engine or LocalPool(min(len(kds), LocalPool().workers))
     with tempfile.TemporaryDirectory(prefix="cake-drake-gains-") as tmp:
