@@ -146,6 +146,12 @@ def test_every_shipped_sweep_file_loads():
     for f in files:
         assert load_sweep(f).runs(), f
     assert len(load_sweep(SMOKE).runs()) <= 4
+    suite = load_sweep(MODELS_DIR / "sweeps" / "suite.yaml").runs()
+    assert len(suite) == 30
+    assert {r.params["case"] for r in suite} == {"exercise", "ipc", "typed"}
+    assert sorted({r.params["task.generate.blocks"] for r in suite}) == list(range(3, 13))
+    ipc = next(r for r in suite if r.params["case"] == "ipc")
+    assert ipc.scenario.task.domain.endswith("variants/blocksworld-ipc.pddl")
 
 
 def test_workers_and_ray_are_one_choice(capsys):
