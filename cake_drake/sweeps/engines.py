@@ -76,21 +76,29 @@ class LocalPool:
         context = multiprocessing.get_context("spawn")
         pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_quiet_worker)
         running: dict = {}
+
+        def refill():
+            while queue and len(running) < workers:
+                job = queue.popleft()
+                running[pool.submit(execute, job)] = job
+                yield ("start", job)
+
         try:
             while queue or running:
-                while queue and len(running) < workers:
-                    job = queue.popleft()
-                    running[pool.submit(execute, job)] = job
-                    yield ("start", job)
+                yield from refill()
                 finished, _ = wait(running, return_when=FIRST_COMPLETED)
                 broken = False
+                answers = []
                 for future in finished:
                     try:
-                        answer = future.result()
+                        answers.append((running[future], future.result()))
+                        del running[future]
                     except BrokenProcessPool:
                         broken = True
-                        continue
-                    yield ("done", running.pop(future), answer)
+                if not broken:
+                    yield from refill()  # the next runs start before the answers are kept
+                for job, answer in answers:
+                    yield ("done", job, answer)
                 if broken:
                     suspects = list(running.values())
                     for job in suspects:
@@ -148,16 +156,21 @@ class RayCluster:
         remote = ray.remote(num_cpus=1, max_retries=0)(execute)
         queue = deque(jobs)
         running: dict = {}
+
+        def refill():
+            slots = max(1, int(ray.cluster_resources().get("CPU", 1)))
+            while queue and len(running) < slots:
+                job = queue.popleft()
+                running[remote.remote(job)] = job
+                yield ("start", job)
+
         try:
             while queue or running:
-                slots = max(1, int(ray.cluster_resources().get("CPU", 1)))
-                while queue and len(running) < slots:
-                    job = queue.popleft()
-                    running[remote.remote(job)] = job
-                    yield ("start", job)
+                yield from refill()
                 ready, _ = ray.wait(list(running), num_returns=1)
-                for ref in ready:
-                    job = running.pop(ref)
+                jobs_ready = [(ref, running.pop(ref)) for ref in ready]
+                yield from refill()  # the next runs start before the answers are kept
+                for ref, job in jobs_ready:
                     try:
                         answer = ray.get(ref)
                     except ray.exceptions.RayError as e:
