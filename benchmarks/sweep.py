@@ -3,14 +3,18 @@
     python benchmarks/sweep.py [SWEEP.yaml ...] [--workers N]
 
 Each sweep is a whole `python -m cake_drake.sweep` process (worker start-up, imports and
-the table included); the speed-up is the serial wall time over the pool's. Both runs
-must give the same table (apart from timings), which is checked.
+the table included); the speed-up is the serial wall time over the pool's. "CPU s" is
+the processor time the sweep's processes used (workers and their helpers included);
+CPU s / wall s is how many cores the sweep actually got, which on a machine shared with
+other work is less than the pool's size. Both runs must give the same table (apart
+from timings), which is checked.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -26,16 +30,21 @@ from cake_drake.sweeps import read_table  # noqa: E402
 from cake_drake.sweeps.worker import TIMINGS  # noqa: E402
 
 
-def one_sweep(path: Path, workers: int) -> tuple[float, list[dict]]:
+def _cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def one_sweep(path: Path, workers: int) -> tuple[float, float, list[dict]]:
     with tempfile.TemporaryDirectory() as out:
         cmd = [sys.executable, "-m", "cake_drake.sweep", str(path), "--out", out, "--quiet"]
-        t0 = time.perf_counter()
+        t0, cpu0 = time.perf_counter(), _cpu()
         r = subprocess.run([*cmd, "--workers", str(workers)], capture_output=True, text=True)
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, _cpu() - cpu0
         if r.returncode != 0:
             sys.exit(f"sweep failed ({r.returncode}): {r.stderr.strip()}")
         rows = read_table(Path(out) / "results.parquet")
-    return wall, [{k: v for k, v in row.items() if k not in TIMINGS} for row in rows]
+    return wall, cpu, [{k: v for k, v in row.items() if k not in TIMINGS} for row in rows]
 
 
 def main() -> None:
@@ -44,14 +53,16 @@ def main() -> None:
     p.add_argument("--workers", type=int, default=os.cpu_count(), help="the pool's size")
     args = p.parse_args()
     print(machine())
-    print(f"sweep | runs | 1 worker s | {args.workers} workers s | speed-up")
+    n = args.workers
+    print(f"sweep | runs | 1 worker: wall s (CPU s) | {n} workers: wall s (CPU s) | speed-up")
     print("--- | --- | --- | --- | ---")
     for path in args.sweeps:
-        serial, rows_1 = one_sweep(path, 1)
-        pool, rows_n = one_sweep(path, args.workers)
+        serial, cpu_1, rows_1 = one_sweep(path, 1)
+        pool, cpu_n, rows_n = one_sweep(path, n)
         same = "" if rows_1 == rows_n else " (tables differ!)"
         print(
-            f"{path.name} | {len(rows_1)} | {serial:.1f} | {pool:.1f} | {serial / pool:.2f}x{same}"
+            f"{path.name} | {len(rows_1)} | {serial:.1f} ({cpu_1:.1f}) | {pool:.1f} ({cpu_n:.1f}) "
+            f"| {serial / pool:.2f}x{same}"
         )
 
 
