@@ -161,6 +161,15 @@ def test_workers_and_ray_are_one_choice(capsys):
     assert "--workers 0" in capsys.readouterr().err
 
 
+def test_a_ray_address_nothing_answers_at_is_one_line_and_writes_nothing(tmp_path, capsys):
+    pytest.importorskip("ray")
+    out = tmp_path / "out"
+    assert main(["sweep", str(SMOKE), "--ray", "127.0.0.1:1", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no Ray cluster answers there" in err
+    assert not out.exists()
+
+
 # --- real sweeps ------------------------------------------------------------------------
 
 

@@ -10,9 +10,11 @@ running.
 
 from __future__ import annotations
 
+import importlib.util
 import multiprocessing
 import os
 import signal
+import socket
 from collections import deque
 from collections.abc import Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -126,17 +128,16 @@ class RayCluster:
         self.address = address
         self.num_cpus = num_cpus
         self._started = False
+        if importlib.util.find_spec("ray") is None:
+            raise InputError("--ray needs Ray: pip install 'cake_drake[ray]' (or pip install ray)")
+        self._reachable()  # before the sweep writes anything
 
     def __str__(self) -> str:
         return f"Ray cluster at {self.address}" if self.address else "local Ray instance"
 
     def _init(self):
-        try:
-            import ray
-        except ImportError:
-            raise InputError(
-                "--ray needs Ray: pip install 'cake_drake[ray]' (or pip install ray)"
-            ) from None
+        import ray
+
         if not ray.is_initialized():
             kwargs = dict(include_dashboard=False, log_to_driver=False, logging_level="ERROR")
             try:
@@ -150,6 +151,19 @@ class RayCluster:
                 raise InputError(f"--ray {where}: cannot start or join Ray ({first})") from None
             self._started = True
         return ray
+
+    def _reachable(self) -> None:
+        """Refuse an address nothing answers at (Ray itself would retry for minutes)."""
+        if not self.address or self.address == "auto":
+            return
+        host, _, port = self.address.split("://")[-1].rpartition(":")
+        try:
+            socket.create_connection((host or "localhost", int(port)), timeout=5).close()
+        except (OSError, ValueError):
+            raise InputError(
+                f"--ray {self.address}: no Ray cluster answers there (give HOST:PORT of a "
+                "head started with `ray start --head`, or auto on one of its nodes)"
+            ) from None
 
     def events(self, jobs: Sequence[dict]) -> Iterator[Event]:
         ray = self._init()
