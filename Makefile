@@ -66,6 +66,7 @@ bench: system-packages-run $(STAMP)
 	$(PY) benchmarks/planning.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/run.py
+	$(PY) benchmarks/sweep.py models/sweeps/smoke.yaml models/sweeps/kd.yaml
 
 clean:
 	rm -rf $(VENV) outputs .pytest_cache

@@ -3,21 +3,26 @@
 Exercise 4.x.3 asks what happens to tracking when the derivative gain drops from 20 to
 5. :func:`study` replays the same reference once per Kd, with the same Kp, from a base
 scenario (its task, world and reference; a planned reference is first recorded by a
-position-mode run), and returns:
+position-mode run). The replays are a sweep over ``controller.kd``
+(:mod:`cake_drake.sweeps`), run in parallel on a local pool, each keeping its measured
+logs; it returns:
 
 * the content of ``gains.json`` - per Kd: RMS and max tracking error per joint (rad),
   settling time after each waypoint, and whether the tower was built (measured from the
   poses);
-* the runs, for :func:`comparison_plot` (``kd_comparison.png``).
+* one :class:`Replay` per Kd (its logs), for :func:`comparison_plot` (``kd_comparison.png``).
 
 ``python -m cake_drake.gains`` is the command (parsing in :mod:`cake_drake.cli`).
 """
 
 from __future__ import annotations
 
+import shutil
 import sys
+import tempfile
 from collections.abc import Sequence
 from copy import deepcopy
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,11 +30,24 @@ from matplotlib.figure import Figure
 
 from cake_drake.dynamic.analysis import settling
 from cake_drake.errors import ExecutionError, InputError, run_cli
+from cake_drake.execution import Logs
 from cake_drake.outputs.files import OutputDir
-from cake_drake.pipeline import RunResult, run
+from cake_drake.pipeline import check, run
 from cake_drake.scenario import ComputedTorque, JointPd, Recorded, Scenario, resolve_path
+from cake_drake.sweeps import LocalPool, Sweep, run_sweep
 
 FINAL_HOLD_S = 1.0
+
+
+@dataclass
+class Replay:
+    """One Kd's replay: the verdict, the measured logs and the Kp/Kd it ran with."""
+
+    kd: float
+    kp: float
+    success: bool
+    message: str
+    logs: Logs
 
 
 def record_reference(base: Scenario, folder: Path) -> Path:
@@ -46,12 +64,14 @@ def record_reference(base: Scenario, folder: Path) -> Path:
 
 
 def study(
-    base: Scenario, kds: Sequence[float], workdir: Path | None = None
-) -> tuple[dict, dict[float, RunResult]]:
+    base: Scenario, kds: Sequence[float], workdir: Path | None = None, engine=None
+) -> tuple[dict, dict[float, Replay]]:
     """Replay ``base``'s reference once per Kd, with the Kp of its ``ComputedTorque``.
 
     A planned reference is first recorded by a position-mode run of the same task (into
-    ``workdir/reference``).
+    ``workdir/reference``). The replays are a sweep (into ``workdir/sweep``, or a
+    temporary folder) on ``engine``: by default a local pool, one worker per Kd up to
+    the machine's cores.
     """
     kds = list(kds)
     if not kds or any(not np.isfinite(k) or k < 0 for k in kds):
@@ -66,24 +86,32 @@ def study(
     else:
         reference = record_reference(base, (workdir or Path("outputs")) / "reference")
         differentiate = "spline"
-    results: dict[float, RunResult] = {}
     table: dict = {
         "kp": kp[0] if len(kp) == 1 else kp,
         "reference": str(reference),
         "differentiate": differentiate,
         "runs": [],
     }
-    for kd in kds:
-        scenario = deepcopy(base)
-        scenario.controller = ComputedTorque(kp=list(kp), kd=[kd])
-        scenario.reference = Recorded(str(reference), differentiate)
-        # A long final hold: the one stretch where the error can be watched decaying
-        # undisturbed (the gripper holds mid-plan last 0.25 s with the fingers acting).
-        scenario.simulation.settle_s = FINAL_HOLD_S
-        scenario.visualization.meshcat = False
-        result = run(scenario, write=False)
-        results[kd] = result
-        logs = result.execution.logs
+    scenario = deepcopy(base)
+    scenario.reference = Recorded(str(reference), differentiate)
+    # A long final hold: the one stretch where the error can be watched decaying
+    # undisturbed (the gripper holds mid-plan last 0.25 s with the fingers acting).
+    scenario.simulation.settle_s = FINAL_HOLD_S
+    scenario.visualization.meshcat = False
+    scenario.outputs.render = False
+    check(scenario, write=False)  # bad input is one line here, not a failed row per Kd
+    sweep = Sweep.of(scenario, grid={"controller.kd": [[kd] for kd in kds]}, collect=["logs"])
+    engine = engine or LocalPool(min(len(kds), LocalPool().workers))
+    with tempfile.TemporaryDirectory(prefix="cake-drake-gains-") as tmp:
+        out = (workdir / "sweep") if workdir is not None else Path(tmp)
+        if workdir is not None:
+            shutil.rmtree(out, ignore_errors=True)  # the study's own folder, run afresh
+        swept = run_sweep(sweep, out, engine, progress=False)
+        if swept.interrupted:
+            raise KeyboardInterrupt
+        results = {kd: _replay(out, row, kp) for kd, row in zip(kds, swept.rows, strict=True)}
+    for kd, replay in results.items():
+        logs = replay.logs
         err = logs.q - logs.q_d
         s = settling(logs.t, logs.q, logs.q_d, logs.v_d)
         table["runs"].append(
@@ -99,11 +127,22 @@ def study(
                     "never_settled": int(sum(not ok for ok in s.settled)),
                     "final_hold": round(s.times[-1], 3) if s.times else None,
                 },
-                "tower_built": result.success,
-                "message": result.message,
+                "tower_built": replay.success,
+                "message": replay.message,
             }
         )
     return table, results
+
+
+def _replay(out: Path, row: dict, kp: list[float]) -> Replay:
+    """A finished row of the study's sweep, with the logs its run kept."""
+    if row["status"] != "done":
+        raise ExecutionError(
+            f"the replay with Kd = {row['controller.kd']:g} failed: {row['error']}"
+        )
+    with np.load(out / row["folder"] / "logs.npz") as data:
+        logs = Logs(**{name: data[name] for name in data.files})
+    return Replay(row["controller.kd"], kp[0], bool(row["success"]), row["message"], logs)
 
 
 def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
@@ -117,7 +156,7 @@ def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
 
 
 def comparison_plot(
-    results: dict[float, RunResult], path: Path | None = None, joint: int = 4
+    results: dict[float, Replay], path: Path | None = None, joint: int = 4
 ) -> Figure:
     """Joint ``joint``'s tracking error (left) and commanded torque (right), one trace per Kd."""
     from cake_drake.outputs.plots import phase_key, phase_spans, shade_phases
@@ -125,12 +164,12 @@ def comparison_plot(
     j = joint - 1
     fig = Figure(figsize=(13, 4.5))
     ax_e, ax_t = fig.subplots(1, 2, sharex=True)
-    first = next(iter(results.values())).execution.logs
+    first = next(iter(results.values())).logs
     spans = phase_spans(first.t, first.phase)
     shade_phases(ax_e, spans)
     shade_phases(ax_t, spans)
     for kd, result in results.items():
-        logs = result.execution.logs
+        logs = result.logs
         ax_e.plot(logs.t, (logs.q[:, j] - logs.q_d[:, j]) * 1000, lw=0.9, label=f"Kd = {kd:g}")
         ax_t.plot(logs.t, logs.tau_commanded[:, j], lw=0.9, label=f"Kd = {kd:g}")
     ax_e.set_ylabel(f"joint {joint}: q − q_d [mrad]")
@@ -138,7 +177,7 @@ def comparison_plot(
     for ax in (ax_e, ax_t):
         ax.set_xlabel("time [s]")
         ax.legend(loc="lower right", fontsize=8)
-    kp = next(iter(results.values())).cake.controller.gains()[0][j]
+    kp = next(iter(results.values())).kp
     fig.suptitle(f"Computed torque, Kp = {kp:g}: tracking error and torque as Kd changes", y=0.99)
     phase_key(fig)
     fig.tight_layout(rect=(0, 0, 1, 0.88))

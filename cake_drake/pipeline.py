@@ -23,9 +23,10 @@ from cake_drake.errors import InputError, NoPlanError
 from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
 from cake_drake.plugins import resolve
-from cake_drake.scenario import Recorded, Scenario, resolve_path
+from cake_drake.scenario import Generate, Recorded, Scenario, portable_path, resolve_path
 from cake_drake.symbolic import (
     DEFAULT_PLANNER,
+    NAMINGS,
     PLANNERS,
     PROBLEM_5_OPTIMAL_LENGTH,
     GroundAction,
@@ -33,7 +34,10 @@ from cake_drake.symbolic import (
     Problem,
     check_state,
     fact_str,
+    load_domain,
     load_problem,
+    parse_problem,
+    random_problem,
     read_plan,
     solve_problem,
     towers,
@@ -41,7 +45,7 @@ from cake_drake.symbolic import (
 )
 from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.faults import Move, RandomFault, Slip, check_faults, resolve_random
-from cake_drake.world.scene import layout
+from cake_drake.world.scene import cube_models, layout
 
 #: A planner: ``(problem, time_limit) -> Plan`` (or a sequence of ground actions).
 Planner = Callable[[Problem, float | None], "Plan | Sequence[GroundAction]"]
@@ -60,6 +64,7 @@ class Checked:
     problem: Problem
     planner: Planner | None  # None when a plan file is executed
     out: Path | None
+    generated: str | None = None  # the PDDL text of task.generate, saved as problem.pddl
 
 
 @dataclass
@@ -119,10 +124,32 @@ def _check_numbers(s: Scenario) -> None:
         _range(s.task.time_limit, 1e-3, 86400.0, "task.time_limit", " s")
 
 
-def load_world_problem(domain: Path, problem_path: Path) -> Problem:
+def generated_problem(g: Generate) -> str:
+    """The PDDL text ``task.generate`` describes (the same fields always give the same text)."""
+    if g.style not in NAMINGS:
+        raise InputError(f"task.generate.style {g.style!r}; choose one of: {', '.join(NAMINGS)}")
+    try:
+        return random_problem(
+            g.blocks,
+            g.seed,
+            g.style,
+            tall=g.tall,
+            max_height=g.max_height,
+            goal_max_height=g.goal_max_height,
+            partial=g.partial,
+        )
+    except InputError as e:
+        raise InputError(f"task.generate: {e}") from None
+
+
+def load_world_problem(domain: Path, problem_path: Path | str, text: str | None = None) -> Problem:
     """A Blocksworld problem (any naming: its domain is read by structure) whose initial
-    state the world can lay out; refused with one line (exit 2) otherwise."""
-    problem = load_problem(domain, problem_path)
+    state the world can lay out; refused with one line (exit 2) otherwise. With ``text``
+    the problem is that PDDL (``problem_path`` only names it in messages)."""
+    if text is None:
+        problem = load_problem(domain, problem_path)
+    else:
+        problem = parse_problem(load_domain(domain), text, str(problem_path))
     view = blocksworld_view(problem)  # refuses a domain the robot cannot execute
     issues = check_state(problem.init, view.blocks, vocabulary=view.roles.vocabulary)
     if issues:
@@ -150,8 +177,22 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     getattr(s.controller, "check", lambda: None)()
     make_controller(s.controller)
     task = s.task
-    problem = load_world_problem(resolve_path(task.domain), resolve_path(task.problem))
-    layout(towers(blocksworld_view(problem).init), s.world.slots)
+    generated = None
+    if task.generate is None:
+        problem = load_world_problem(resolve_path(task.domain), resolve_path(task.problem))
+    else:
+        generated = generated_problem(task.generate)
+        try:
+            problem = load_world_problem(resolve_path(task.domain), "task.generate", generated)
+        except InputError as e:
+            style_domain = portable_path(NAMINGS[task.generate.style].domain_file)
+            raise InputError(
+                f"{e} (task.generate.style {task.generate.style} writes problems for "
+                f"{style_domain}; task.domain is {task.domain})"
+            ) from None
+    view = blocksworld_view(problem)
+    cube_models(view.blocks)
+    layout(towers(view.init), s.world.slots)
     planner = None
     if task.plan:
         if task.planner != DEFAULT_PLANNER:
@@ -183,7 +224,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     out = Path(s.outputs.folder) if write else None
     if out is not None:
         check_output_folder(out)
-    return Checked(s, problem, planner, out)
+    return Checked(s, problem, planner, out, generated)
 
 
 #: Expected simulated seconds per action, to draw a random fault's time within the run.
@@ -350,6 +391,8 @@ def run(
 
         with OutputDir(checked.out) as staged:
             write_outputs(staged, result, worker, scenario.outputs.render, meshcat)
+            if checked.generated is not None:
+                staged.path("problem.pddl").write_text(checked.generated)
             result.written = staged.commit()
         return result
     finally:

@@ -48,11 +48,31 @@ PACKAGE = "package://cake_drake/"
 
 
 @dataclass
+class Generate:
+    """A seeded random Blocksworld problem (:func:`cake_drake.symbolic.random_problem`).
+
+    Given in ``task.generate``, it takes the place of ``task.problem``: the same fields
+    always write the same PDDL, which a run saves as ``problem.pddl``. ``style`` is the
+    naming (``exercise``, ``ipc`` or ``typed``) and must fit ``task.domain``.
+    """
+
+    blocks: int = 5
+    seed: int = 0
+    style: str = "exercise"
+    tall: bool = False  # few, tall towers (start and goal)
+    partial: bool = False  # about half of the goal's on facts, no on-table fact
+    max_height: int | None = None  # cap on the start towers' heights
+    goal_max_height: int | None = None  # cap on the goal towers' heights
+
+
+@dataclass
 class Task:
     """What to do: a PDDL problem, solved by ``planner`` or by the plan in ``plan``."""
 
     domain: str = PACKAGE + "pddl/blocksworld.pddl"
     problem: str = PACKAGE + "pddl/problem_5.pddl"
+    #: A generated problem instead of ``problem`` (for studies over many problems).
+    generate: Generate | None = None
     #: Execute this plan file (plan.txt, .soln, sas_plan) instead of planning; validated first.
     plan: str = ""
     #: A planner of the registry (``python -m cake_drake.plan --help``) or module:attribute.
@@ -401,6 +421,7 @@ __all__ = [
     "RandomFault",
     "Slip",
     "CustomController",
+    "Generate",
     "JointPd",
     "Motion",
     "Outputs",

@@ -14,6 +14,7 @@ from cake_drake.gains import study
 from cake_drake.geometric.trajectory import PHASE_NAMES
 from cake_drake.outputs.report import gravity_torques
 from cake_drake.scenario import Recorded, Scenario
+from cake_drake.world.scene import make_control_plant
 
 pytestmark = pytest.mark.slow
 J4 = 3  # joint 4, zero-based
@@ -35,11 +36,10 @@ def test_replay_builds_the_tower(replays):
 
 def test_static_torque_is_the_gravity_term(replays):
     _, results = replays
-    r = results[20.0]
-    logs = r.execution.logs
+    logs = results[20.0].logs
     still = stationary_samples(logs.v, logs.v_d)
     assert still.sum() > 20
-    g = gravity_torques(r.cake.scene.control_plant, logs.q[still])[:, J4]
+    g = gravity_torques(make_control_plant(), logs.q[still])[:, J4]
     tau = logs.tau_commanded[still, J4]
     assert np.all(np.abs(g) > 1.0), "joint 4 carries a gravity load whenever the arm is still"
     rel = np.abs(tau - g) / np.abs(g)
@@ -49,9 +49,8 @@ def test_static_torque_is_the_gravity_term(replays):
 
 def test_dynamic_torque_peaks_fall_in_lift_and_transport(replays):
     _, results = replays
-    r = results[20.0]
-    logs = r.execution.logs
-    g = gravity_torques(r.cake.scene.control_plant, logs.q)[:, J4]
+    logs = results[20.0].logs
+    g = gravity_torques(make_control_plant(), logs.q)[:, J4]
     dynamic = np.abs(logs.tau_commanded[:, J4] - g)
     top = np.argsort(dynamic)[-10:]
     phases = {PHASE_NAMES[logs.phase[i]] for i in top}
@@ -67,12 +66,12 @@ def test_lower_kd_tracks_worse(replays):
 
 def test_overshoot_decays_within_half_a_second_at_kd_20(replays):
     _, results = replays
-    logs = results[20.0].execution.logs
+    logs = results[20.0].logs
     s = settling(logs.t, logs.q, logs.q_d, logs.v_d)
     assert len(s.times) >= 10  # every gripper close and open holds the arm still
     # The final hold (1 s, nothing else acting) is where the decay can be watched whole.
     assert s.settled[-1] and s.times[-1] < 0.5, f"final hold settled in {s.times[-1]:.2f} s"
-    slow = settling(*(lambda lg: (lg.t, lg.q, lg.q_d, lg.v_d))(results[5.0].execution.logs))
+    slow = settling(*(lambda lg: (lg.t, lg.q, lg.q_d, lg.v_d))(results[5.0].logs))
     assert slow.times[-1] > s.times[-1], "Kd = 5 should settle more slowly than Kd = 20"
 
 

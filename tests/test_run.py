@@ -164,7 +164,7 @@ def test_collisions_are_reported_and_avoided_on_a_crowded_table(tmp_path):
     assert "goal reached" in avoided.stdout
 
 
-@pytest.mark.parametrize("module", ["run", "gains", "world", "plan", "validate", "saycan"])
+@pytest.mark.parametrize("module", ["run", "gains", "sweep", "world", "plan", "validate", "saycan"])
 def test_every_cli_reports_a_bad_command_line_in_one_line(module):
     r = subprocess.run(
         [sys.executable, "-m", f"cake_drake.{module}", "--no-such-flag"],

@@ -40,9 +40,12 @@ def plot_png(job: dict) -> None:
     joint_plot(**job)
 
 
-def _serve(conn, blocks, warm_poses, render: bool) -> None:
+def _serve(conn, parent_end, blocks, warm_poses, render: bool) -> None:
     import signal
 
+    # The fork copied the parent's end of the pipe too: close it, so that the parent's
+    # death (a crash, a kill) is an end of file here and this process ends with it.
+    parent_end.close()
     # Ctrl-C reaches the whole process group: the parent decides, the helper stays quiet.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
@@ -60,7 +63,10 @@ def _serve(conn, blocks, warm_poses, render: bool) -> None:
         conn.send(("error", f"output worker failed to start: {e}"))
         return
     while True:
-        job = conn.recv()
+        try:
+            job = conn.recv()
+        except EOFError:
+            return
         if job is None:
             return
         kind, args = job
@@ -89,9 +95,12 @@ class OutputWorker:
             ctx = mp.get_context("fork")
             self._conn, child = ctx.Pipe()
             self._process = ctx.Process(
-                target=_serve, args=(child, self._blocks, _pack(initial_poses), render), daemon=True
+                target=_serve,
+                args=(child, self._conn, self._blocks, _pack(initial_poses), render),
+                daemon=True,
             )
             self._process.start()
+            child.close()  # the helper's end lives in the helper alone
         except (ValueError, OSError):
             self._process = None
 
