@@ -33,12 +33,16 @@ KNOWN = {
 _LEFTOVER = re.compile(r"^\.(?P<name>.+)\.(staging|old)-(?P<pid>\d+)$")
 
 
-def check_output_folder(out: str | Path) -> None:
-    """Refuse, before any work, an output folder this run could not or must not replace."""
+def check_output_folder(out: str | Path, whole: bool = True) -> None:
+    """Refuse, before any work, an output folder this run could not or must not replace.
+
+    ``whole=False`` for a folder that is added to rather than replaced (a sweep's): then
+    only that it is a folder, or can become one, and that it is writable.
+    """
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another output folder")
-    if out.is_dir():
+    if out.is_dir() and whole:
         entries = {p.name for p in out.iterdir()}
         if entries and MARKER not in entries and not entries <= KNOWN:
             strange = sorted(entries - KNOWN)

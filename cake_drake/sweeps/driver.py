@@ -146,10 +146,10 @@ def run_sweep(
 ) -> SweepResult:
     """Run every run of ``sweep`` on ``engine`` (:class:`LocalPool` or :class:`RayCluster`)
     into ``out``; a run that fails or crashes is a row, and Ctrl-C keeps what finished."""
-    from cake_drake.pipeline import check_output_folder
+    from cake_drake.outputs.files import check_output_folder
 
     out = Path(out)
-    check_output_folder(out)
+    check_output_folder(out, whole=False)
     jobs = prepare(sweep, out)
     on_disk = _rows_on_disk(out) if out.exists() else {}
     if on_disk and not resume:

@@ -39,6 +39,9 @@ METRICS = (
     "max_offset_mm",
     "collisions",
     "unmet_goals",
+    "faults",
+    "events",
+    "replans",
     "worker",
 )
 #: Columns that measure the machine rather than the run (they differ between engines).
@@ -124,6 +127,9 @@ def _run(scenario, collect: list[str], folder: Path) -> dict:
         "max_offset_mm": round(max(e.offsets.values(), default=0.0) * 1000, 3),
         "collisions": len(e.warnings),
         "unmet_goals": len(result.unmet),
+        "faults": "; ".join(f"{type(f).__name__.lower()} {vars(f)}" for f in result.faults),
+        "events": len(e.monitoring.get("events", [])),
+        "replans": int(e.monitoring.get("replans", 0)),
     }
     for spec in collect:
         extra = resolve(spec, COLLECTORS, "collector")(result, folder)

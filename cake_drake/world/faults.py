@@ -60,7 +60,7 @@ class Move:
 
 @dataclass
 class RandomFault:
-    seed: int = 0
+    seed: int | None = None  # None: the scenario's seed (so a sweep's seeds draw faults)
 
 
 FaultConfig = Slip | Knock | Move | RandomFault
@@ -117,10 +117,12 @@ def check_faults(faults, blocks, n_actions: int) -> None:
             )
 
 
-def resolve_random(fault: RandomFault, blocks, n_actions: int, makespan: float) -> FaultConfig:
-    """The fault a seed stands for: kind, cube, time (within the first 80 % of the
-    expected run) or action, and where a moved cube goes."""
-    rng = random.Random(f"fault-{fault.seed}")
+def resolve_random(
+    fault: RandomFault, blocks, n_actions: int, makespan: float, seed: int = 0
+) -> FaultConfig:
+    """The fault a seed stands for (the fault's own, else ``seed``): kind, cube, time
+    (within the first 80 % of the expected run) or action, and where a moved cube goes."""
+    rng = random.Random(f"fault-{seed if fault.seed is None else fault.seed}")
     kind = rng.choice(["slip", "knock", "move"])
     if kind == "slip":
         return Slip(rng.randint(1, n_actions))
