@@ -38,12 +38,12 @@ def fault_free_sim_s(case_scenario: Scenario) -> float:
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--workers", type=int, default=None)
-    p.add_argument("--ray", nargs="?", const="local", default=None)
+    p.add_argument("--ray", nargs="?", const="", default=None, help="local Ray, or ADDRESS")
     p.add_argument("--out", type=Path, default=None, help="keep the sweep's folder here")
     args = p.parse_args()
     print(machine())
     sweep = load_sweep(SWEEP)
-    engine = RayCluster(args.ray) if args.ray else LocalPool(args.workers)
+    engine = RayCluster(args.ray or None) if args.ray is not None else LocalPool(args.workers)
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp) / "recovery"
         run_sweep(sweep, out, engine, progress=True)
