@@ -156,9 +156,11 @@ def waypoints_for(
         z_transit = max(_transit_height(poses, block, params), X_place.translation()[2])
         above = X_place.translation().copy()
         above[2] = z_transit
-        # Up and clear of the tower just built, so the next move crosses nothing.
+        # Up and clear of the tower just built - the transit height counting the cube
+        # just placed - so the next move, which starts here, crosses nothing.
+        z_after = target[2] + CUBE_SIZE + params.transit_clearance
         retract = X_place.translation().copy()
-        retract[2] = max(z_transit, retract[2] + params.approach)
+        retract[2] = max(z_transit, z_after, retract[2] + params.approach)
         return [
             Waypoint("transport", RigidTransform(R, above), "closed"),
             Waypoint("place", X_place, "open"),
