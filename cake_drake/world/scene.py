@@ -113,15 +113,17 @@ SLOTS: tuple[tuple[float, float], ...] = make_slots()
 
 @dataclass
 class WorldConfig:
-    """How the world is simulated. The defaults hold a stack of eight cubes at 10 ms steps.
+    """How the world is simulated. The defaults hold a tower of ten cubes at 10 ms steps.
 
     The ``world`` section of a :class:`cake_drake.scenario.Scenario`.
     """
 
     time_step: float = 0.01  # s, discrete MultibodyPlant step (SAP)
-    #: SAP's near-rigid threshold: lower values regularise stiff contact less; 0.3-0.5
-    #: keeps a tower from sagging at 10 ms steps, 1.0 (Drake's default) lets it sag ~5 mm.
-    sap_near_rigid_threshold: float = 0.4
+    #: SAP's near-rigid threshold: lower values soften stiff contact less. A tower of
+    #: cubes on corner spheres is an inverted pendulum on springs: at 0.4 a 10-high tower
+    #: leans further with every cube and falls; 0.1 holds it within 1 mrad, at the same
+    #: cost per step (docs/world.md). 1.0 (Drake's default) lets even 5 cubes sag ~5 mm.
+    sap_near_rigid_threshold: float = 0.1
     contact_approximation: str = "sap"  # "lagged" (Drake's default) lets a tower slide apart
     finger_kp: float = 1000.0  # N/m; with the fingers commanded shut this squeezes ~20 N
     finger_kd: float = 20.0  # N s/m
