@@ -84,6 +84,7 @@ def _check_numbers(s: Scenario) -> None:
     w, m, sim = s.world, s.motion, s.simulation
     _range(w.time_step, 0.0005, 0.02, "world.time_step", " s")
     _range(w.slot_radius, 0.2, 2.0, "world.slot_radius", " m")
+    _range(w.slot_spacing, 0.05, 1.0, "world.slot_spacing", " m")
     _range(w.sap_near_rigid_threshold, 0.0, 1.0, "world.sap_near_rigid_threshold")
     _range(w.finger_kp, 1e-3, 1e6, "world.finger_kp", " N/m")
     _range(w.finger_kd, 0.0, 1e5, "world.finger_kd", " N s/m")
@@ -215,6 +216,25 @@ def get_plan(checked: Checked) -> Plan:
     return Plan(tuple(actions), label, "-", "-", 0.0, False)
 
 
+def check_table_room(problem: Problem, actions: Sequence[GroundAction], slots: int) -> None:
+    """Refuse a plan that puts more blocks on the table at once than it has slots.
+
+    Every block on the table stands on a slot of its own, so the initial state and each
+    put-down must find one free; checked on the plan, before anything is simulated.
+    """
+    view = blocksworld_view(problem)
+    on_table = sum(1 for f in view.init if f[0] == "on-table")
+    for k, action in enumerate(actions, start=1):
+        meaning = view.roles.classify(action).canonical().name
+        on_table += {"pick-up": -1, "put-down": 1}.get(meaning, 0)
+        if on_table > slots:
+            raise InputError(
+                f"the plan puts {on_table} blocks on the table at once (action {k} "
+                f"{action}), but the table holds {slots} slots within the arm's reach "
+                "(world.slot_radius, world.slot_spacing)"
+            )
+
+
 def verdict(problem: Problem, execution: Execution) -> tuple[bool, list[str], str]:
     """(success, unmet goal facts, one-line message), from the measured poses.
 
@@ -285,6 +305,7 @@ def run(
         worker = OutputWorker(blocks, initial, render=scenario.outputs.render)
     try:
         plan = get_plan(checked)
+        check_table_room(problem, plan.actions, len(scenario.world.slots))
         stages["planning"] = time.perf_counter() - t
         if not quiet and checked.planner is not None:
             print(plan.note(), file=sys.stderr)
@@ -336,4 +357,4 @@ def run(
             worker.close()
 
 
-__all__ = ["Checked", "RunResult", "check", "get_plan", "run", "verdict"]
+__all__ = ["Checked", "RunResult", "check", "check_table_room", "get_plan", "run", "verdict"]

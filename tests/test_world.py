@@ -26,8 +26,8 @@ from cake_drake.world.facts import read_facts
 from cake_drake.world.scene import (
     CUBE_SIZE,
     Q_HOME,
-    WorldConfig,
     SLOTS,
+    WorldConfig,
     add_world,
     cube_colours,
     cube_poses,
