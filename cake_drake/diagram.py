@@ -91,6 +91,7 @@ def _add_reference(
     actions: Sequence[GroundAction],
     problem: Problem,
     q_start: np.ndarray,
+    slots: tuple[tuple[float, float], ...],
 ) -> tuple[ReferenceSource, TimedSolver | None]:
     """The one place that tells a planned reference from a recorded one."""
     ref = scenario.reference
@@ -111,7 +112,7 @@ def _add_reference(
         cube_bodies={n: int(scene.cube_body(n).index()) for n in scene.cubes},
         hand_body=int(plant.GetBodyByName("panda_hand", scene.hand).index()),
         X_hand_grasp=X_HAND_GRASP,
-        slots=scenario.world.slots,
+        slots=slots,
     )
     roles = blocksworld_roles(problem.domain)
     settings = MotionSettings(
@@ -148,11 +149,14 @@ def build_diagram(
     actions: Sequence[GroundAction] = (),
     q_start: np.ndarray = Q_HOME,
     meshcat=None,
+    slots: Sequence[tuple[float, float]] | None = None,
 ) -> CakeDiagram:
     """Wire the action source, geometry and controller around the simulated Panda, for
     ``problem``'s blocks starting at ``initial_poses`` and the planned ``actions``.
 
     ``meshcat`` (a ``pydrake.geometry.Meshcat``) adds a visualizer; never needed headless.
+    ``slots`` are the table slots a put-down may use (default: every slot the scenario's
+    world holds).
     """
     controller = make_controller(scenario.controller)
     blocks = list(blocksworld_view(problem).blocks)
@@ -165,7 +169,8 @@ def build_diagram(
     plant.SetDefaultPositions(scene.arm, q_start)
     plant.SetDefaultPositions(scene.hand, [0.04, 0.04])
 
-    reference, solver = _add_reference(builder, scenario, scene, actions, problem, q_start)
+    slots = tuple(scenario.world.slots if slots is None else slots)
+    reference, solver = _add_reference(builder, scenario, scene, actions, problem, q_start, slots)
     builder.Connect(reference.port("finger_state"), plant.get_desired_state_input_port(scene.hand))
     tau = controller.add_to(
         builder, scene, reference.port("desired_state"), reference.port("desired_acceleration")

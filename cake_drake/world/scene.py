@@ -74,9 +74,14 @@ TABLE_MARGIN = 0.05  # m: a slot's centre stays this far inside the table's edge
 #: (table to 0.56 m, gripper pointing down) out to 0.65 m (``benchmarks/reach.py``);
 #: 0.55 m keeps 0.1 m of that in hand.
 SLOT_RADIUS = 0.55
-#: m between neighbouring slots: the hand is 20 cm wide across its fingers, which point
-#: along the arc, so 10 cm of hand plus 2 cm of cube plus 2.4 cm to spare.
+#: m between neighbouring slots, at least: the hand is 20 cm wide across its fingers,
+#: which point along the arc, so 10 cm of hand plus 2 cm of cube plus 2.4 cm to spare.
 SLOT_SPACING = 0.144
+#: m between neighbouring slots, at most: a problem that needs few slots gets them
+#: spread this far apart. Reaching the table 15 degrees clockwise of a tower 8 or more
+#: high, the Panda's forearm (it hangs to that side) hits the tower; 17.5 degrees
+#: clears a 10-high one. Few slots needed means few towers, and tall ones.
+SLOT_SPACING_MAX = 0.25
 
 
 def make_slots(
@@ -111,6 +116,26 @@ def make_slots(
 SLOTS: tuple[tuple[float, float], ...] = make_slots()
 
 
+def spread_slots(
+    count: int,
+    radius: float = SLOT_RADIUS,
+    spacing: float = SLOT_SPACING,
+    spacing_max: float = SLOT_SPACING_MAX,
+) -> tuple[tuple[float, float], ...]:
+    """``count`` slots (or every slot, if the arc holds fewer) as far apart as the arc
+    allows, between ``spacing`` and ``spacing_max`` apart.
+
+    The widest spacing, in millimetre steps down from ``spacing_max``, at which
+    :func:`make_slots` still finds ``count`` slots; never closer than ``spacing``.
+    """
+    wide = max(spacing, spacing_max)
+    for k in range(int(round((wide - spacing) * 1000)) + 1):
+        slots = make_slots(radius, wide - k / 1000)
+        if len(slots) >= count:
+            return slots[:count]
+    return make_slots(radius, spacing)[: max(count, 0)]
+
+
 @dataclass
 class WorldConfig:
     """How the world is simulated. The defaults hold a tower of ten cubes at 10 ms steps.
@@ -128,12 +153,17 @@ class WorldConfig:
     finger_kp: float = 1000.0  # N/m; with the fingers commanded shut this squeezes ~20 N
     finger_kd: float = 20.0  # N s/m
     slot_radius: float = SLOT_RADIUS  # m: table slots on this arc around the base
-    slot_spacing: float = SLOT_SPACING  # m between neighbouring slots
+    slot_spacing: float = SLOT_SPACING  # m between neighbouring slots, at least
+    slot_spacing_max: float = SLOT_SPACING_MAX  # m between them, at most (few slots needed)
 
     @property
     def slots(self) -> tuple[tuple[float, float], ...]:
-        """Every slot on the table (:func:`make_slots`)."""
+        """Every slot the table holds, at the closest spacing (:func:`make_slots`)."""
         return make_slots(self.slot_radius, self.slot_spacing)
+
+    def slots_for(self, count: int) -> tuple[tuple[float, float], ...]:
+        """The ``count`` slots a problem needs, spread out (:func:`spread_slots`)."""
+        return spread_slots(count, self.slot_radius, self.slot_spacing, self.slot_spacing_max)
 
 
 @dataclass
