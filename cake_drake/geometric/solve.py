@@ -7,6 +7,7 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from pydrake.math import RigidTransform
 
 from cake_drake.errors import IkError
 from cake_drake.geometric.collisions import Collision, CollisionChecker, action_collisions
@@ -85,9 +86,24 @@ def _swing_seed(q: np.ndarray, p_from: np.ndarray, p_to: np.ndarray) -> np.ndarr
     return seed if abs(seed[0]) <= Q1_LIMIT else np.array(q, float)
 
 
-def _plan(action, index, world, ik, trajectory, timing, params, after=None, until=None):
+def _solve(ik: IkSolver, wp: Waypoint, q_seed, action, index: int) -> np.ndarray:
+    """IK for one waypoint, or an :class:`IkError` naming the action, phase and pose."""
+    q = ik.solve(wp.X_WG, q_seed)
+    if q is None:
+        p = np.round(wp.X_WG.translation(), 3).tolist()
+        raise IkError(
+            f"action {index + 1} {action}: no IK solution ({ik.name}) for the "
+            f"{wp.phase} pose at {p} m (gripper pointing down); the cube may be out of reach"
+        )
+    return q
+
+
+def _plan(
+    action, index, world, ik, trajectory, timing, params, after=None, until=None, release=True
+):
     """IK for the waypoints after phase ``after`` (all when None); moves appended up to
-    and including phase ``until`` (all when None)."""
+    and including phase ``until`` (all when None). With ``release`` False the fingers
+    keep their command at ``until`` (only the settle is held)."""
     waypoints = waypoints_for(action, world, params)
     if after is not None:
         waypoints = waypoints[[w.phase for w in waypoints].index(after) + 1 :]
@@ -98,20 +114,15 @@ def _plan(action, index, world, ik, trajectory, timing, params, after=None, unti
     for wp in waypoints:
         if wp.phase in TRANSIT_PHASES:
             q_seed = _swing_seed(q_seed, p_seed, wp.X_WG.translation())
-        q = ik.solve(wp.X_WG, q_seed)
-        if q is None:
-            p = np.round(wp.X_WG.translation(), 3).tolist()
-            raise IkError(
-                f"action {index + 1} {action}: no IK solution ({ik.name}) for the "
-                f"{wp.phase} pose at {p} m (gripper pointing down); the cube may be out of reach"
-            )
+        q = _solve(ik, wp, q_seed, action, index)
         solutions.append(q)
         if appending:
             trajectory.move(q, wp.phase, index, timing)
             want = GRIPPER_OPEN if wp.gripper == "open" else GRIPPER_CLOSED
             if want != trajectory.end_gripper:
                 trajectory.hold(timing.settle_time, wp.phase, index)
-                trajectory.hold(timing.gripper_time, wp.phase, index, gripper=want)
+                if release or wp.phase != until:
+                    trajectory.hold(timing.gripper_time, wp.phase, index, gripper=want)
         appending = appending and wp.phase != until
         q_seed, p_seed = q, wp.X_WG.translation()
     return tuple(waypoints), tuple(solutions)
@@ -184,6 +195,14 @@ def solve_action(
     return best[2]
 
 
+#: The place is planned in two more steps: from above the target, the move down to the
+#: place pose (fingers closed); there, the release (:func:`release_action`).
+PLACE = "place"
+#: m: a hand that stands this far (xy) off its command at the place pose is moved by
+#: that much before the fingers open; closer, it opens where it is.
+RELEASE_CORRECTION = 0.0005
+
+
 def refine_action(
     action: GroundAction,
     index: int,
@@ -194,11 +213,55 @@ def refine_action(
     params: WaypointParams,
     after: str = REFINE_AFTER,
 ) -> Motion:
-    """Plan and append the moves of ``action`` after phase ``after`` again, from the
-    world measured now (``params`` as :func:`solve_action` chose them): the place pose
-    from where the cube sits in the hand *now*, and from the support's pose now."""
-    waypoints, solutions = _plan(action, index, world, ik, trajectory, timing, params, after)
-    return Motion(waypoints, solutions, (), params.transit_clearance, params)
+    """Plan the moves of ``action`` after phase ``after`` again, from the world measured
+    now (``params`` as :func:`solve_action` chose them): the place pose from where the
+    cube sits in the hand *now* and from the support's pose now. Appends the move down to
+    the place pose, fingers still closed; ``Motion.pending_after`` is then ``"place"``
+    and ``Motion.waypoints[0]`` the commanded place pose (see :func:`release_action`)."""
+    waypoints, solutions = _plan(
+        action, index, world, ik, trajectory, timing, params, after, until=PLACE, release=False
+    )
+    return Motion(waypoints, solutions, (), params.transit_clearance, params, PLACE)
+
+
+def release_action(
+    action: GroundAction,
+    index: int,
+    world: WorldView,
+    ik: IkSolver,
+    trajectory: JointTrajectory,
+    timing: Timing,
+    params: WaypointParams,
+    X_commanded: RigidTransform,
+) -> Motion:
+    """At the place pose, fingers closed: open them where the cube belongs, then retract.
+
+    A controller may hold the hand a little off its command (the computed-torque
+    controller's model lacks the cube: 1.7 mm towards the base, steadily, at every
+    place). Measured now, with the cube's pose in the hand and the support's, that
+    offset is taken off the command, so the cube lands where it belongs instead of a
+    step aside at every level of a tower.
+    """
+    waypoints = list(waypoints_for(action, world, params))
+    k = [w.phase for w in waypoints].index(PLACE)
+    place, retract = waypoints[k], waypoints[k + 1]
+    error = world.X_WG.translation() - X_commanded.translation()
+    error[2] = 0.0  # the height is the drop's, not corrected
+    if np.linalg.norm(error) > RELEASE_CORRECTION:
+        place = replace(
+            place, X_WG=RigidTransform(place.X_WG.rotation(), place.X_WG.translation() - error)
+        )
+        retract = replace(
+            retract,
+            X_WG=RigidTransform(retract.X_WG.rotation(), retract.X_WG.translation() - error),
+        )
+        q = _solve(ik, place, trajectory.end_q, action, index)
+        trajectory.move(q, PLACE, index, timing)
+        trajectory.hold(timing.settle_time, PLACE, index)
+    trajectory.hold(timing.gripper_time, PLACE, index, gripper=GRIPPER_OPEN)
+    q = _solve(ik, retract, trajectory.end_q, action, index)
+    trajectory.move(q, retract.phase, index, timing)
+    return Motion((place, retract), (q,), (), params.transit_clearance, params)
 
 
 class TimedSolver:
