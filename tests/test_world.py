@@ -86,9 +86,9 @@ def _hold_arm_sources(builder, scene):
     return q_away
 
 
-@pytest.mark.parametrize("n", [5, 8])
+@pytest.mark.parametrize("n", [5, 10])
 def test_a_tower_of_cubes_holds(n):
-    blocks = list("abcdefgh")[:n]
+    blocks = list("abcdefghij")[:n]
     builder = DiagramBuilder()
     scene = add_world(builder, blocks, WorldConfig(), arm_gains=([600.0] * 7, [50.0] * 7))
     q_away = _hold_arm_sources(builder, scene)
@@ -102,7 +102,7 @@ def test_a_tower_of_cubes_holds(n):
     end = cube_poses(scene, context)
     top = blocks[-1]
     sag = start[top].translation()[2] - end[top].translation()[2]
-    assert 0 <= sag < 0.002, f"top cube sagged {sag * 1000:.2f} mm"
+    assert -0.0005 < sag < 0.002, f"top cube sagged {sag * 1000:.2f} mm"  # laid out pressed
     for b in blocks:
         slide = np.linalg.norm(end[b].translation()[:2] - start[b].translation()[:2])
         assert slide < 0.0005, f"{b} slid {slide * 1000:.2f} mm"
