@@ -106,6 +106,7 @@ def _check_numbers(s: Scenario) -> None:
     _range(wp.approach, 0.0, 0.5, "motion.waypoints.approach", " m")
     _range(wp.transit_clearance, 0.0, 0.5, "motion.waypoints.transit_clearance", " m")
     _range(wp.place_drop, 0.0, 0.05, "motion.waypoints.place_drop", " m")
+    _range(wp.release_height, 0.0, 0.05, "motion.waypoints.release_height", " m")
     _range(wp.slot_clearance, 0.0, 0.5, "motion.waypoints.slot_clearance", " m")
     if m.avoid_collisions and not m.collision_check:
         raise InputError(
