@@ -234,7 +234,7 @@ def check_table_room(problem: Problem, actions: Sequence[GroundAction], slots: i
         if on_table > slots:
             raise InputError(
                 f"the plan puts {on_table} blocks on the table at once (action {k} "
-                f"{action}), but the table holds {slots} slots within the arm's reach "
+                f"{action}), but the table holds {slots} slots on the arm's arc "
                 "(world.slot_radius, world.slot_spacing)"
             )
     return most

@@ -97,7 +97,8 @@ def test_same_inputs_same_plan_and_trajectory():
 
 
 def test_unreachable_cube_is_exit_3_naming_the_action(tmp_path):
-    r = cli("--slot-radius", "1.0", "--out", str(tmp_path), "--no-render")
+    # 0.9 m: on the table, out of reach
+    r = cli("--slot-radius", "0.9", "--out", str(tmp_path), "--no-render")
     assert r.returncode == 3
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert "action 1 (unstack a b)" in r.stderr and "pre-grasp" in r.stderr
