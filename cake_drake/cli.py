@@ -123,6 +123,12 @@ def run_parser() -> argparse.ArgumentParser:
     g.add_argument("--time-step", type=float, help="world.time_step, s (default 0.01)")
     g.add_argument("--slot-radius", type=float, help="world.slot_radius, m (default 0.55)")
     g.add_argument(
+        "--slot-spacing",
+        type=float,
+        help="world.slot_spacing and world.slot_spacing_max: the slots stand this far apart, m "
+        "(default: 0.144 to 0.2, spread as the plan allows)",
+    )
+    g.add_argument(
         "--no-collision-check", action="store_true", help="motion.collision_check: false"
     )
     g.add_argument(
@@ -215,6 +221,8 @@ def scenario_from_args(args: argparse.Namespace):
         s.world.time_step = args.time_step
     if args.slot_radius is not None:
         s.world.slot_radius = args.slot_radius
+    if args.slot_spacing is not None:
+        s.world.slot_spacing = s.world.slot_spacing_max = args.slot_spacing
     if args.no_collision_check:
         s.motion.collision_check = False
     if args.avoid_collisions:

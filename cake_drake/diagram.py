@@ -119,6 +119,7 @@ def _add_reference(
     problem: Problem,
     q_start: np.ndarray,
     planner,
+    slots: tuple[tuple[float, float], ...],
 ) -> tuple[ReferenceSource, TimedSolver | None]:
     """The one place that tells a planned reference from a recorded one."""
     ref = scenario.reference
@@ -135,7 +136,7 @@ def _add_reference(
         cube_bodies={n: int(scene.cube_body(n).index()) for n in scene.cubes},
         hand_body=int(plant.GetBodyByName("panda_hand", scene.hand).index()),
         X_hand_grasp=X_HAND_GRASP,
-        slots=scenario.world.slots,
+        slots=slots,
     )
     context = SourceContext(
         tuple(actions), problem, indices, planner, scenario.world.time_step, ref.max_replans
@@ -180,6 +181,7 @@ def build_diagram(
     meshcat=None,
     planner=None,
     faults=(),
+    slots: Sequence[tuple[float, float]] | None = None,
 ) -> CakeDiagram:
     """Wire the action source, geometry and controller around the simulated Panda, for
     ``problem``'s blocks starting at ``initial_poses`` and the planned ``actions``.
@@ -188,6 +190,8 @@ def build_diagram(
     ``planner`` is what an action source may replan with (default: the default planner).
     ``faults`` are resolved faults (:mod:`cake_drake.world.faults`): slips and knocks become
     systems here; moves happen in :func:`cake_drake.execution.execute`.
+    ``slots`` are the table slots a put-down may use (default: every slot the scenario's
+    world holds).
     """
     controller = make_controller(scenario.controller)
     blocks = list(blocksworld_view(problem).blocks)
@@ -200,8 +204,16 @@ def build_diagram(
     plant.SetDefaultPositions(scene.arm, q_start)
     plant.SetDefaultPositions(scene.hand, [0.04, 0.04])
 
+    slots = tuple(scenario.world.slots if slots is None else slots)
     reference, solver = _add_reference(
-        builder, scenario, scene, actions, problem, q_start, planner or _default_planner()
+        builder,
+        scenario,
+        scene,
+        actions,
+        problem,
+        q_start,
+        planner or _default_planner(),
+        slots,
     )
     finger_command = reference.port("finger_state")
     slips = [f.action for f in faults if isinstance(f, Slip)]

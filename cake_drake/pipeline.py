@@ -92,6 +92,8 @@ def _check_numbers(s: Scenario) -> None:
     w, m, sim = s.world, s.motion, s.simulation
     _range(w.time_step, 0.0005, 0.02, "world.time_step", " s")
     _range(w.slot_radius, 0.2, 2.0, "world.slot_radius", " m")
+    _range(w.slot_spacing, 0.05, 1.0, "world.slot_spacing", " m")
+    _range(w.slot_spacing_max, 0.05, 1.0, "world.slot_spacing_max", " m")
     _range(w.sap_near_rigid_threshold, 0.0, 1.0, "world.sap_near_rigid_threshold")
     _range(w.finger_kp, 1e-3, 1e6, "world.finger_kp", " N/m")
     _range(w.finger_kd, 0.0, 1e5, "world.finger_kd", " N s/m")
@@ -112,6 +114,7 @@ def _check_numbers(s: Scenario) -> None:
     _range(wp.approach, 0.0, 0.5, "motion.waypoints.approach", " m")
     _range(wp.transit_clearance, 0.0, 0.5, "motion.waypoints.transit_clearance", " m")
     _range(wp.place_drop, 0.0, 0.05, "motion.waypoints.place_drop", " m")
+    _range(wp.release_height, 0.0, 0.05, "motion.waypoints.release_height", " m")
     _range(wp.slot_clearance, 0.0, 0.5, "motion.waypoints.slot_clearance", " m")
     if m.avoid_collisions and not m.collision_check:
         raise InputError(
@@ -266,6 +269,28 @@ def get_plan(checked: Checked) -> Plan:
     return Plan(tuple(actions), label, "-", "-", 0.0, False)
 
 
+def check_table_room(problem: Problem, actions: Sequence[GroundAction], slots: int) -> int:
+    """How many table slots the plan needs at once; refused if more than ``slots``.
+
+    Every block on the table stands on a slot of its own, so the initial state and each
+    put-down must find one free; checked on the plan, before anything is simulated.
+    """
+    view = blocksworld_view(problem)
+    on_table = sum(1 for f in view.init if f[0] == "on-table")
+    most = on_table
+    for k, action in enumerate(actions, start=1):
+        meaning = view.roles.classify(action).canonical().name
+        on_table += {"pick-up": -1, "put-down": 1}.get(meaning, 0)
+        most = max(most, on_table)
+        if on_table > slots:
+            raise InputError(
+                f"the plan puts {on_table} blocks on the table at once (action {k} "
+                f"{action}), but the table holds {slots} slots on the arm's arc "
+                "(world.slot_radius, world.slot_spacing)"
+            )
+    return most
+
+
 def verdict(problem: Problem, execution: Execution) -> tuple[bool, list[str], str]:
     """(success, unmet goal facts, one-line message), from the measured poses.
 
@@ -324,7 +349,8 @@ def run(
     problem = checked.problem
     view = blocksworld_view(problem)
     blocks = list(view.blocks)
-    initial = layout(towers(view.init), scenario.world.slots)
+    stacks = towers(view.init)
+    initial = layout(stacks, scenario.world.slots)  # to warm up the renderer with
     if scenario.visualization.meshcat and meshcat is None:
         from pydrake.geometry import StartMeshcat
 
@@ -336,6 +362,10 @@ def run(
         worker = OutputWorker(blocks, initial, render=scenario.outputs.render)
     try:
         plan = get_plan(checked)
+        needed = check_table_room(problem, plan.actions, len(scenario.world.slots))
+        # As many slots as the plan needs, as far apart as the arc allows.
+        slots = scenario.world.slots_for(needed)
+        initial = layout(stacks, slots)
         stages["planning"] = time.perf_counter() - t
         if not quiet and checked.planner is not None:
             print(plan.note(), file=sys.stderr)
@@ -360,6 +390,7 @@ def run(
             meshcat=meshcat,
             planner=planner,
             faults=faults,
+            slots=slots,
         )
         stages["diagram_build"] = time.perf_counter() - t
 
@@ -400,4 +431,4 @@ def run(
             worker.close()
 
 
-__all__ = ["Checked", "RunResult", "check", "get_plan", "run", "verdict"]
+__all__ = ["Checked", "RunResult", "check", "check_table_room", "get_plan", "run", "verdict"]

@@ -97,7 +97,8 @@ def test_same_inputs_same_plan_and_trajectory():
 
 
 def test_unreachable_cube_is_exit_3_naming_the_action(tmp_path):
-    r = cli("--slot-radius", "1.0", "--out", str(tmp_path), "--no-render")
+    # 0.9 m: on the table, out of reach
+    r = cli("--slot-radius", "0.9", "--out", str(tmp_path), "--no-render")
     assert r.returncode == 3
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert "action 1 (unstack a b)" in r.stderr and "pre-grasp" in r.stderr
@@ -147,7 +148,8 @@ def test_invalid_plan_file_is_exit_1(tmp_path):
 def test_collisions_are_reported_and_avoided_on_a_crowded_table(tmp_path):
     # Slots 0.4 m from the base stand 10 cm apart: the 20 cm-wide hand reaching for c
     # sweeps through the d-e tower. The plan is fine symbolically; geometry is not.
-    crowded = cli("--slot-radius", "0.4", "--out", str(tmp_path / "a"), "--no-render")
+    crowd = ("--slot-radius", "0.4", "--slot-spacing", "0.104")
+    crowded = cli(*crowd, "--out", str(tmp_path / "a"), "--no-render")
     assert crowded.returncode == 3
     lines = crowded.stderr.strip().splitlines()
     assert any(
@@ -157,9 +159,7 @@ def test_collisions_are_reported_and_avoided_on_a_crowded_table(tmp_path):
     assert lines[-1].startswith("error: plan not executed")
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["collisions"] and summary["success"] is False
-    avoided = cli(
-        "--slot-radius", "0.4", "--avoid-collisions", "--out", str(tmp_path / "b"), "--no-render"
-    )
+    avoided = cli(*crowd, "--avoid-collisions", "--out", str(tmp_path / "b"), "--no-render")
     assert avoided.returncode == 0, avoided.stderr
     assert "goal reached" in avoided.stdout
 

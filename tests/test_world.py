@@ -26,12 +26,14 @@ from cake_drake.world.facts import read_facts
 from cake_drake.world.scene import (
     CUBE_SIZE,
     Q_HOME,
+    SLOTS,
     WorldConfig,
     add_world,
-    cube_models,
+    cube_colours,
     cube_poses,
     layout,
     make_control_plant,
+    make_slots,
     set_arm_positions,
     set_cube_poses,
 )
@@ -84,9 +86,9 @@ def _hold_arm_sources(builder, scene):
     return q_away
 
 
-@pytest.mark.parametrize("n", [5, 8])
+@pytest.mark.parametrize("n", [5, 10])
 def test_a_tower_of_cubes_holds(n):
-    blocks = list("abcdefgh")[:n]
+    blocks = list("abcdefghij")[:n]
     builder = DiagramBuilder()
     scene = add_world(builder, blocks, WorldConfig(), arm_gains=([600.0] * 7, [50.0] * 7))
     q_away = _hold_arm_sources(builder, scene)
@@ -100,7 +102,7 @@ def test_a_tower_of_cubes_holds(n):
     end = cube_poses(scene, context)
     top = blocks[-1]
     sag = start[top].translation()[2] - end[top].translation()[2]
-    assert 0 <= sag < 0.002, f"top cube sagged {sag * 1000:.2f} mm"
+    assert -0.0005 < sag < 0.002, f"top cube sagged {sag * 1000:.2f} mm"  # laid out pressed
     for b in blocks:
         slide = np.linalg.norm(end[b].translation()[:2] - start[b].translation()[:2])
         assert slide < 0.0005, f"{b} slid {slide * 1000:.2f} mm"
@@ -131,17 +133,53 @@ def test_facts_flag_tilted_and_floating_cubes():
     assert any("b rests on nothing" in p for p in reading.problems)
 
 
-def test_too_many_blocks_or_towers_is_bad_input():
-    with pytest.raises(InputError, match="at most 8 blocks"):
-        cube_models(list("abcdefghi"))
-    with pytest.raises(InputError, match="table slots"):
-        layout([[c] for c in "abcdefghi"])
+def test_more_towers_than_the_table_holds_is_bad_input():
+    assert len(SLOTS) == 12
+    layout([[f"b{i}"] for i in range(12)])  # twelve blocks, each on the table: fits
+    with pytest.raises(InputError, match="13 towers need more table slots than the table holds"):
+        layout([[f"b{i}"] for i in range(13)])
+
+
+def test_slots_stay_on_the_table_in_front_of_the_robot_and_apart():
+    for radius, spacing in [(0.55, 0.144), (0.4, 0.104), (0.65, 0.144), (1.0, 0.144)]:
+        slots = np.array(make_slots(radius, spacing))
+        assert len(slots) > 0
+        np.testing.assert_allclose(np.hypot(*slots.T), radius)
+        assert np.all(slots[:, 0] >= 0.05) and np.all(slots[:, 0] <= 0.9)  # table: x -0.25..0.95
+        assert np.all(np.abs(slots[:, 1]) <= 0.55)  # table: y within 0.6
+        gaps = np.linalg.norm(slots[:, None] - slots[None], axis=-1) + np.eye(len(slots))
+        assert gaps.min() >= spacing - 1e-9
+    # centre-out: the first two straddle the x axis
+    assert SLOTS[0][1] < 0 < SLOTS[1][1] and abs(SLOTS[0][1] + SLOTS[1][1]) < 1e-12
+    assert make_slots(0.55, 1.2) == ()  # wider apart than the arc allows
+
+
+def test_any_block_names_get_distinct_colours_in_natural_order():
+    names = [f"b{i}" for i in range(1, 13)] + ["table", "hand", "x-1"]
+    colours = cube_colours(names)
+    assert [colours[f"b{i}"][0] for i in (1, 2, 8)] == ["red", "orange", "pink"]
+    assert colours["b10"][0] not in {colours[f"b{i}"][0] for i in range(1, 10)}  # b10 after b9
+    rgbs = np.array([rgb for _, rgb in colours.values()])
+    gaps = np.linalg.norm(rgbs[:, None] - rgbs[None], axis=-1) + np.eye(len(rgbs))
+    assert gaps.min() > 0.1, "two cubes share (nearly) a colour"
+    scene = add_world(DiagramBuilder(), names)
+    inspector = scene.scene_graph.model_inspector()
+    from pydrake.geometry import Role
+
+    for name, (_, rgb) in colours.items():
+        frame = scene.plant.GetBodyFrameIdOrThrow(scene.cube_body(name).index())
+        for role, get in [
+            (Role.kIllustration, inspector.GetIllustrationProperties),
+            (Role.kPerception, inspector.GetPerceptionProperties),
+        ]:
+            (gid,) = inspector.GetGeometries(frame, role)
+            diffuse = get(gid).GetProperty("phong", "diffuse")
+            np.testing.assert_allclose([diffuse.r(), diffuse.g(), diffuse.b()], rgb)
 
 
 @pytest.mark.slow
 def test_render_is_not_blank_and_shows_each_cube_colour():
     from cake_drake.world.render import Renderer
-    from cake_drake.world.scene import CUBE_COLOURS
 
     rgba = Renderer(BLOCKS5, width=640, height=480).render(layout([list("cba"), list("ed")]))
     assert rgba.shape == (480, 640, 4)
@@ -155,7 +193,7 @@ def test_render_is_not_blank_and_shows_each_cube_colour():
         "blue": (0.12, 0.3, 0.9),
     }
     for key in "abcde":
-        name = CUBE_COLOURS[key]
+        name = cube_colours(BLOCKS5)[key][0]
         hue = rgb_to_hsv(np.array(rgb[name]))[0]
         dh = np.abs((hsv[..., 0] - hue + 0.5) % 1 - 0.5)
         pixels = int(((dh < 0.03) & (hsv[..., 1] > 0.5) & (hsv[..., 2] > 0.2)).sum())
@@ -184,3 +222,26 @@ def test_world_cli_bad_input_is_one_line(tmp_path):
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_twelve_blocks_lay_out_and_render_each_in_its_own_colour():
+    """Every cube seen where it stands has its own colour (beyond the eight named ones),
+    told apart from the eleven others by chromaticity (shading scales brightness)."""
+    from cake_drake.world.render import EYE, TARGET, Renderer, look_at
+
+    blocks = [f"b{i}" for i in range(1, 13)]
+    width, height = 640, 480
+    poses = layout([blocks[0:5], blocks[5:9], blocks[9:12]])
+    image = Renderer(blocks, width, height).render(poses)[..., :3].astype(float)
+    X_CW = look_at(EYE, TARGET).inverse()
+    focal = (height / 2) / np.tan(np.radians(45.0) / 2)  # the renderer's 45 deg field of view
+    colours = cube_colours(blocks)
+    chroma = {b: np.array(rgb) / sum(rgb) for b, (_, rgb) in colours.items()}
+    for b in blocks:
+        p = X_CW @ poses[b].translation()
+        u = int(round(focal * p[0] / p[2] + width / 2))
+        v = int(round(focal * p[1] / p[2] + height / 2))
+        seen = image[v - 1 : v + 2, u - 1 : u + 2].reshape(-1, 3).mean(axis=0)
+        seen = seen / seen.sum()
+        nearest = min(blocks, key=lambda o: np.linalg.norm(seen - chroma[o]))
+        assert nearest == b, f"{b} ({colours[b][0]}) looks like {nearest} ({colours[nearest][0]})"

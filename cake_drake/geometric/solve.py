@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from pydrake.math import RigidTransform
 
 from cake_drake.errors import IkError
 from cake_drake.geometric.collisions import Collision, CollisionChecker, action_collisions
@@ -16,7 +18,13 @@ from cake_drake.geometric.trajectory import (
     JointTrajectory,
     Timing,
 )
-from cake_drake.geometric.waypoints import Waypoint, WaypointParams, WorldView, waypoints_for
+from cake_drake.geometric.waypoints import (
+    PLACE_ACTIONS,
+    Waypoint,
+    WaypointParams,
+    WorldView,
+    waypoints_for,
+)
 from cake_drake.symbolic import GroundAction
 
 
@@ -28,6 +36,11 @@ class Motion:
     solutions: tuple[np.ndarray, ...]  # IK solution of each waypoint
     collisions: tuple[tuple[str, Collision], ...] = ()  # (phase, collision), if checked
     transit_clearance: float = 0.0  # the clearance the motion was planned with (m)
+    #: The waypoint parameters the motion was planned with (the collision-free variant).
+    params: WaypointParams = field(default_factory=WaypointParams)
+    #: The phase after which the moves still have to be planned again from the world as
+    #: it is measured then (:func:`refine_action`); None when every move was appended.
+    pending_after: str | None = None
 
     def warnings(self, index: int, action: GroundAction) -> list[str]:
         """One line per collision, naming the action and the phase."""
@@ -41,25 +54,77 @@ AVOID_RAISES = (0.0, 0.05, 0.10)
 AVOID_TURNS = (0, 1)
 
 
-def _plan(action, index, world, ik, trajectory, timing, params):
+#: A place is planned whole when its action starts (so that an unreachable pose or a
+#: collision is found before the arm moves), but only moved up to this phase: the rest
+#: is planned again from the poses measured there (:func:`refine_action`). A cube creeps
+#: in a friction grasp while it is carried (millimetres over a long transport, see
+#: docs/world.md); measured above the target, the creep is corrected before it lands.
+REFINE_AFTER = "transport"
+
+
+#: Moves between two poses at the transit height, far apart around the base.
+TRANSIT_PHASES = ("pre-grasp", "transport")
+
+
+#: rad, the Panda's joint-1 limit (datasheet).
+Q1_LIMIT = 2.8973
+
+
+def _swing_seed(q: np.ndarray, p_from: np.ndarray, p_to: np.ndarray) -> np.ndarray:
+    """``q`` turned about joint 1 by the change in azimuth from ``p_from`` to ``p_to``.
+
+    The Panda is symmetric about its first joint, so this is (nearly) the solution for
+    the target, and the joint-space move to it swings the hand around the base at a
+    constant height. Seeded from ``q`` itself, IK may land on another arm posture (the
+    elbow elsewhere, or joint 1 the long way round), and the straight joint-space move
+    between the two postures dips the hand by up to 7 cm: into a 10-high tower.
+    """
+    turn = math.atan2(p_to[1], p_to[0]) - math.atan2(p_from[1], p_from[0])
+    turn = (turn + math.pi) % (2 * math.pi) - math.pi
+    seed = np.array(q, float)
+    seed[0] += turn
+    return seed if abs(seed[0]) <= Q1_LIMIT else np.array(q, float)
+
+
+def _solve(ik: IkSolver, wp: Waypoint, q_seed, action, index: int) -> np.ndarray:
+    """IK for one waypoint, or an :class:`IkError` naming the action, phase and pose."""
+    q = ik.solve(wp.X_WG, q_seed)
+    if q is None:
+        p = np.round(wp.X_WG.translation(), 3).tolist()
+        raise IkError(
+            f"action {index + 1} {action}: no IK solution ({ik.name}) for the "
+            f"{wp.phase} pose at {p} m (gripper pointing down); the cube may be out of reach"
+        )
+    return q
+
+
+def _plan(
+    action, index, world, ik, trajectory, timing, params, after=None, until=None, release=True
+):
+    """IK for the waypoints after phase ``after`` (all when None); moves appended up to
+    and including phase ``until`` (all when None). With ``release`` False the fingers
+    keep their command at ``until`` (only the settle is held)."""
     waypoints = waypoints_for(action, world, params)
+    if after is not None:
+        waypoints = waypoints[[w.phase for w in waypoints].index(after) + 1 :]
     solutions = []
     q_seed = trajectory.end_q
+    p_seed = world.X_WG.translation()  # where the hand is at q_seed
+    appending = True
     for wp in waypoints:
-        q = ik.solve(wp.X_WG, q_seed)
-        if q is None:
-            p = np.round(wp.X_WG.translation(), 3).tolist()
-            raise IkError(
-                f"action {index + 1} {action}: no IK solution ({ik.name}) for the "
-                f"{wp.phase} pose at {p} m (gripper pointing down); the cube may be out of reach"
-            )
+        if wp.phase in TRANSIT_PHASES:
+            q_seed = _swing_seed(q_seed, p_seed, wp.X_WG.translation())
+        q = _solve(ik, wp, q_seed, action, index)
         solutions.append(q)
-        trajectory.move(q, wp.phase, index, timing)
-        want = GRIPPER_OPEN if wp.gripper == "open" else GRIPPER_CLOSED
-        if want != trajectory.end_gripper:
-            trajectory.hold(timing.settle_time, wp.phase, index)
-            trajectory.hold(timing.gripper_time, wp.phase, index, gripper=want)
-        q_seed = q
+        if appending:
+            trajectory.move(q, wp.phase, index, timing)
+            want = GRIPPER_OPEN if wp.gripper == "open" else GRIPPER_CLOSED
+            if want != trajectory.end_gripper:
+                trajectory.hold(timing.settle_time, wp.phase, index)
+                if release or wp.phase != until:
+                    trajectory.hold(timing.gripper_time, wp.phase, index, gripper=want)
+        appending = appending and wp.phase != until
+        q_seed, p_seed = q, wp.X_WG.translation()
     return tuple(waypoints), tuple(solutions)
 
 
@@ -73,8 +138,13 @@ def solve_action(
     params: WaypointParams = WaypointParams(),
     checker: CollisionChecker | None = None,
     avoid_collisions: bool = False,
+    refine: bool = False,
 ) -> Motion:
     """Append ``action``'s motion to ``trajectory``: waypoints, IK, timed moves.
+
+    With ``refine``, a place action is planned whole but moved only up to
+    :data:`REFINE_AFTER`; ``Motion.pending_after`` then says that the rest is to be
+    planned by :func:`refine_action` once the arm is there.
 
     Every waypoint's IK is seeded from the previous solution, so consecutive poses stay
     on one branch of the arm's kinematics. Raises :class:`IkError` naming the action,
@@ -88,6 +158,7 @@ def solve_action(
     free, the one with the shallowest collisions is kept and its collisions returned.
     """
     start = trajectory.copy()
+    until = REFINE_AFTER if refine and action.name in PLACE_ACTIONS else None
     variants = [(0.0, 0)]
     if checker is not None and avoid_collisions:
         variants = [(dz, turn) for dz in AVOID_RAISES for turn in AVOID_TURNS]
@@ -101,7 +172,9 @@ def solve_action(
         )
         candidate = start.copy()
         try:
-            waypoints, solutions = _plan(action, index, world, ik, candidate, timing, p)
+            waypoints, solutions = _plan(
+                action, index, world, ik, candidate, timing, p, until=until
+            )
         except IkError as e:  # another variant may still reach: keep the first error
             first_error = first_error or e
             continue
@@ -112,13 +185,88 @@ def solve_action(
             )
         depth = sum(c.depth for _, c in found)
         if best is None or depth < best[0]:
-            best = (depth, candidate, Motion(waypoints, solutions, found, p.transit_clearance))
+            motion = Motion(waypoints, solutions, found, p.transit_clearance, p, until)
+            best = (depth, candidate, motion)
         if not found:
             break
     if best is None:
         raise first_error
     trajectory.assign(best[1])
     return best[2]
+
+
+#: The place is planned in two more steps: from above the target, the move down to the
+#: place pose (fingers closed); there, the release (:func:`release_action`).
+PLACE = "place"
+#: m: a hand that stands this far (xy) off its command at the place pose is moved by
+#: that much before the fingers open; closer, it opens where it is.
+RELEASE_CORRECTION = 0.0005
+
+
+def refine_action(
+    action: GroundAction,
+    index: int,
+    world: WorldView,
+    ik: IkSolver,
+    trajectory: JointTrajectory,
+    timing: Timing,
+    params: WaypointParams,
+    after: str = REFINE_AFTER,
+) -> Motion:
+    """Plan the moves of ``action`` after phase ``after`` again, from the world measured
+    now (``params`` as :func:`solve_action` chose them): the place pose from where the
+    cube sits in the hand *now* and from the support's pose now. Appends the move down to
+    the place pose, fingers still closed; ``Motion.pending_after`` is then ``"place"``
+    and ``Motion.waypoints[0]`` the commanded place pose (see :func:`release_action`)."""
+    above = replace(params, place_drop=params.place_drop + params.release_height)
+    waypoints, solutions = _plan(
+        action, index, world, ik, trajectory, timing, above, after, until=PLACE, release=False
+    )
+    return Motion(waypoints, solutions, (), params.transit_clearance, params, PLACE)
+
+
+def release_action(
+    action: GroundAction,
+    index: int,
+    world: WorldView,
+    ik: IkSolver,
+    trajectory: JointTrajectory,
+    timing: Timing,
+    params: WaypointParams,
+    X_commanded: RigidTransform,
+) -> Motion:
+    """Just above the place pose, fingers closed: set the cube down where it belongs,
+    open the fingers, retract.
+
+    A controller may hold the hand a little off its command (the computed-torque
+    controller's model lacks the cube: 1.7 mm towards the base, steadily, at every
+    place). Measured here, with the cube's pose in the hand and the support's, that
+    offset is taken off the command of the last move, which lowers the cube by
+    ``params.release_height`` to ``params.place_drop`` above its support: the cube lands
+    where it belongs instead of a step aside at every level, and drops only 0.5 mm (an
+    off-centre cube falling 2 mm pivots in the opening fingers and rocks the tower).
+    The correction is made with the cube still clear of its support (at 0.5 mm the
+    support's friction would hold it back).
+    """
+    waypoints = list(waypoints_for(action, world, params))
+    k = [w.phase for w in waypoints].index(PLACE)
+    place, retract = waypoints[k], waypoints[k + 1]
+    error = world.X_WG.translation() - X_commanded.translation()
+    if params.release_height > 0 or np.linalg.norm(error) > RELEASE_CORRECTION:
+        place = replace(
+            place, X_WG=RigidTransform(place.X_WG.rotation(), place.X_WG.translation() - error)
+        )
+        retract = replace(
+            retract,
+            X_WG=RigidTransform(retract.X_WG.rotation(), retract.X_WG.translation() - error),
+        )
+        q = _solve(ik, place, trajectory.end_q, action, index)
+        trajectory.move(q, PLACE, index, timing)
+        trajectory.hold(timing.settle_time, PLACE, index)
+    trajectory.hold(timing.gripper_time, PLACE, index, gripper=GRIPPER_OPEN)
+    q = _solve(ik, retract, trajectory.end_q, action, index)
+    trajectory.move(q, retract.phase, index, timing)
+    return Motion((place, retract), (q,), (), params.transit_clearance, params)
 
 
 class TimedSolver:

@@ -43,7 +43,11 @@ class WaypointParams:
 
     approach: float = 0.06  # pre-grasp and retract: this far above grasp/place
     transit_clearance: float = 0.05  # held cube's bottom this far above every tower
-    place_drop: float = 0.002  # release the cube this far above its support
+    place_drop: float = 0.0005  # release the cube this far above its support
+    #: The move down stops this much higher; there the hand's offset from its command is
+    #: measured, and the last, short move takes it off and sets the cube down
+    #: (:func:`cake_drake.geometric.solve.release_action`).
+    release_height: float = 0.0015
     slot_clearance: float = 0.07  # a table slot is free if no cube is this close (xy)
     #: Quarter turns added to the comfortable gripper yaw. The hand is 20 cm wide along
     #: the fingers: turned a quarter, it reaches between towers that are close side by side.
@@ -168,9 +172,11 @@ def waypoints_for(
         z_transit = max(_transit_height(poses, block, params), X_place.translation()[2])
         above = X_place.translation().copy()
         above[2] = z_transit
-        # Up and clear of the tower just built, so the next move crosses nothing.
+        # Up and clear of the tower just built - the transit height counting the cube
+        # just placed - so the next move, which starts here, crosses nothing.
+        z_after = target[2] + CUBE_SIZE + params.transit_clearance
         retract = X_place.translation().copy()
-        retract[2] = max(z_transit, retract[2] + params.approach)
+        retract[2] = max(z_transit, z_after, retract[2] + params.approach)
         return [
             Waypoint("transport", RigidTransform(R, above), "closed"),
             Waypoint("place", X_place, "open"),

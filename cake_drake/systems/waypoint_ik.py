@@ -13,7 +13,7 @@ from pydrake.systems.framework import LeafSystem
 from cake_drake.errors import CakeDrakeError, ExecutionError
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import IkSolver
-from cake_drake.geometric.solve import solve_action
+from cake_drake.geometric.solve import refine_action, release_action, solve_action
 from cake_drake.geometric.trajectory import JointLimits, JointTrajectory, Timing
 from cake_drake.geometric.waypoints import PICK_ACTIONS, WaypointParams, WorldView
 from cake_drake.symbolic import GroundAction
@@ -69,6 +69,11 @@ class Progress:
     working: int = -1  # index of the action being executed, -1 when idle
     done: int = 0  # actions finished
     held: str | None = None  # cube in the hand, by the plan
+    #: A place whose last moves are still to be planned from the world as measured when
+    #: the arm gets there: (the action as the geometric layer reads it, the domain's own
+    #: name of it, the waypoint parameters it was planned with, the pose commanded at
+    #: the place when the arm is on its way down to it, else None).
+    pending: tuple[GroundAction, str, WaypointParams, RigidTransform | None] | None = None
     error: str | None = None
     warnings: tuple[str, ...] = ()  # collisions found along the planned moves
 
@@ -156,7 +161,10 @@ class WaypointIk(LeafSystem):
         t = context.get_time()
         if prog.working >= 0:
             if t >= prog.trajectory.end_time - 1e-9:
-                new = replace(prog, working=-1, done=prog.done + 1)
+                if prog.pending is not None:
+                    new = self._refine(context, prog, t)
+                else:
+                    new = replace(prog, working=-1, done=prog.done + 1)
                 state.get_mutable_abstract_state(self._state_index).set_value(new)
             return
         cmd: ActionCommand = self._action_port.Eval(context)
@@ -189,14 +197,50 @@ class WaypointIk(LeafSystem):
                 m.waypoints,
                 m.checker,
                 m.avoid_collisions,
+                refine=True,
             )
             found = tuple(named(w) for w in motion.warnings(cmd.index, action))
+            pending = (
+                (action, str(cmd.action), motion.params, None) if motion.pending_after else None
+            )
             new = replace(
-                prog, trajectory=traj, working=cmd.index, held=held, warnings=prog.warnings + found
+                prog,
+                trajectory=traj,
+                working=cmd.index,
+                held=held,
+                pending=pending,
+                warnings=prog.warnings + found,
             )
         except ExecutionError as e:
             new = replace(prog, working=-1, error=named(str(e)))
         state.get_mutable_abstract_state(self._state_index).set_value(new)
+
+    def _refine(self, context, prog: Progress, t: float) -> Progress:
+        """Above the target: plan the move down to the place pose from the cube's pose in
+        the hand and the support's pose as measured now. At the place pose: open the
+        fingers where the cube belongs, then retract
+        (:func:`cake_drake.geometric.solve.release_action`)."""
+        action, own_name, params, X_place = prog.pending
+        traj = prog.trajectory.copy()
+        if t > traj.end_time:
+            traj.hold(t - traj.end_time, "transport" if X_place is None else "place", prog.working)
+        world = self._world(context, prog.held)
+        m = self._motion
+        try:
+            if X_place is None:
+                motion = refine_action(
+                    action, prog.working, world, self._ik, traj, m.timing, params
+                )
+                pending = (action, own_name, params, motion.waypoints[0].X_WG)
+            else:
+                release_action(
+                    action, prog.working, world, self._ik, traj, m.timing, params, X_place
+                )
+                pending = None
+        except ExecutionError as e:
+            error = str(e).replace(str(action), own_name)
+            return replace(prog, working=-1, pending=None, error=error)
+        return replace(prog, trajectory=traj, pending=pending)
 
     def _trajectory(self, context) -> JointTrajectory:
         return context.get_abstract_state(self._state_index).get_value().trajectory

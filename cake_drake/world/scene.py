@@ -1,4 +1,4 @@
-"""The stage: a table, a Franka Panda at its edge and up to eight 4 cm cubes.
+"""The stage: a table, a Franka Panda at its edge and one 4 cm cube per block.
 
 Everything is loaded from ``models/`` through Drake's ``PackageMap``: the package
 ``cake_drake`` is the repository's ``models/`` folder, and ``pybullet_franka_panda`` is the
@@ -6,13 +6,23 @@ Panda mesh folder that ships inside the ``pybullet`` wheel (installed from PyPI,
 downloaded at run time; the simulator itself is never imported).
 """
 
+import colorsys
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, SceneGraph
+from pydrake.geometry import (
+    CollisionFilterDeclaration,
+    GeometrySet,
+    IllustrationProperties,
+    PerceptionProperties,
+    Rgba,
+    Role,
+    SceneGraph,
+)
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import (
     LoadModelDirectives,
@@ -32,17 +42,19 @@ from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError
 
 CUBE_SIZE = 0.04  # m, edge of every cube
-#: The coloured cube models in models/cubes (cube_<key>.sdf) and their colours. Blocks
-#: take them in sorted order of their names: for a..e, block a is the red cube.
-CUBE_COLOURS: dict[str, str] = {
-    "a": "red",
-    "b": "orange",
-    "c": "yellow",
-    "d": "green",
-    "e": "blue",
-    "f": "purple",
-    "g": "cyan",
-    "h": "pink",
+#: Every block is an instance of this one model; its colour is set per instance.
+CUBE_MODEL = "package://cake_drake/cubes/cube.sdf"
+#: The first eight cube colours, by name (blocks take colours in natural order of their
+#: names: for a..e, block a is the red cube). Further cubes take :func:`cube_colour`'s.
+CUBE_COLOURS: dict[str, tuple[float, float, float]] = {
+    "red": (0.85, 0.12, 0.12),
+    "orange": (0.95, 0.55, 0.05),
+    "yellow": (0.95, 0.85, 0.1),
+    "green": (0.15, 0.7, 0.2),
+    "blue": (0.12, 0.3, 0.9),
+    "purple": (0.55, 0.2, 0.75),
+    "cyan": (0.1, 0.8, 0.85),
+    "pink": (0.95, 0.45, 0.7),
 }
 ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
 FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
@@ -54,44 +66,105 @@ SCENE_DIRECTIVES = "package://cake_drake/scene/panda_on_table.dmd.yaml"
 CONTROL_DIRECTIVES = "package://cake_drake/scene/panda_control.dmd.yaml"
 
 
-SLOT_RADIUS = 0.55  # m from the robot base: where the Panda is dexterous pointing down
+#: The table top (models/scene/table.sdf): x from -0.25 to 0.95 m, y within +-0.6 m.
+TABLE_X = (-0.25, 0.95)
+TABLE_HALF_WIDTH = 0.6
+TABLE_MARGIN = 0.05  # m: a slot's centre stays this far inside the table's edges
+#: m from the robot base. The Panda reaches every height a 10-high tower needs
+#: (table to 0.56 m, gripper pointing down) out to 0.65 m (``benchmarks/reach.py``);
+#: 0.55 m keeps 0.1 m of that in hand.
+SLOT_RADIUS = 0.55
+#: m between neighbouring slots, at least: the hand is 20 cm wide across its fingers,
+#: which point along the arc, so 10 cm of hand plus 2 cm of cube plus 2.4 cm to spare.
+SLOT_SPACING = 0.144
+#: m between neighbouring slots, at most: a problem that needs few slots gets them
+#: spread this far apart. Reaching the table 15 degrees clockwise of a tower 8 or more
+#: high, the Panda's forearm (it hangs to that side) hits the tower; 17.5 degrees
+#: clears a 10-high one. Few slots needed means few towers, and tall ones.
+SLOT_SPACING_MAX = 0.2
 
 
-def make_slots(radius: float = SLOT_RADIUS) -> tuple[tuple[float, float], ...]:
-    """Eight table slots on an arc of ``radius`` in front of the robot, 15 deg apart.
+def make_slots(
+    radius: float = SLOT_RADIUS, spacing: float = SLOT_SPACING
+) -> tuple[tuple[float, float], ...]:
+    """Every table slot on the arc of ``radius`` around the base, ``spacing`` apart.
 
-    Ordered centre-out (right of centre first), so that a few towers stand where the
-    arm is most dexterous and the camera sees them all.
+    The slots stand symmetrically about the x axis (half a step either side of it) and
+    run out to the sides as far as the table reaches, in front of the base (x >= the
+    margin); ordered centre-out, right of centre first, so that a few towers stand where
+    the arm is most dexterous and the camera sees them all. At the defaults: 12 slots,
+    15 degrees apart, from -82.5 to 82.5 degrees.
     """
-    angles = [-7.5, 7.5, -22.5, 22.5, -37.5, 37.5, -52.5, 52.5]
-    return tuple(
-        (radius * math.cos(math.radians(a)), radius * math.sin(math.radians(a))) for a in angles
-    )
+    if radius <= 0 or spacing <= 0 or spacing >= 2 * radius:
+        return ()
+    step = 2 * math.asin(spacing / (2 * radius))  # chord of ``spacing``
+    x_lo = max(TABLE_MARGIN, TABLE_X[0] + TABLE_MARGIN)
+    x_hi = TABLE_X[1] - TABLE_MARGIN
+    slots = []
+    k = 0
+    while (k + 0.5) * step <= math.pi / 2:
+        for sign in (-1, 1):
+            a = sign * (k + 0.5) * step
+            x, y = radius * math.cos(a), radius * math.sin(a)
+            if x_lo <= x <= x_hi and abs(y) <= TABLE_HALF_WIDTH - TABLE_MARGIN:
+                slots.append((x, y))
+        k += 1
+    return tuple(slots)
 
 
-#: (x, y) of each table slot, in the order towers are assigned to them.
+#: (x, y) of each table slot at the defaults, in the order towers are assigned to them.
 SLOTS: tuple[tuple[float, float], ...] = make_slots()
+
+
+def spread_slots(
+    count: int,
+    radius: float = SLOT_RADIUS,
+    spacing: float = SLOT_SPACING,
+    spacing_max: float = SLOT_SPACING_MAX,
+) -> tuple[tuple[float, float], ...]:
+    """``count`` slots (or every slot, if the arc holds fewer) as far apart as the arc
+    allows, between ``spacing`` and ``spacing_max`` apart.
+
+    The widest spacing, in millimetre steps down from ``spacing_max``, at which
+    :func:`make_slots` still finds ``count`` slots; never closer than ``spacing``.
+    """
+    wide = max(spacing, spacing_max)
+    for k in range(int(round((wide - spacing) * 1000)) + 1):
+        slots = make_slots(radius, wide - k / 1000)
+        if len(slots) >= count:
+            return slots[:count]
+    return make_slots(radius, spacing)[: max(count, 0)]
 
 
 @dataclass
 class WorldConfig:
-    """How the world is simulated. The defaults hold a stack of eight cubes at 10 ms steps.
+    """How the world is simulated. The defaults hold a tower of ten cubes at 10 ms steps.
 
     The ``world`` section of a :class:`cake_drake.scenario.Scenario`.
     """
 
     time_step: float = 0.01  # s, discrete MultibodyPlant step (SAP)
-    #: SAP's near-rigid threshold: lower values regularise stiff contact less; 0.3-0.5
-    #: keeps a tower from sagging at 10 ms steps, 1.0 (Drake's default) lets it sag ~5 mm.
-    sap_near_rigid_threshold: float = 0.4
+    #: SAP's near-rigid threshold: lower values soften stiff contact less. A tower of
+    #: cubes on corner spheres is an inverted pendulum on springs: at 0.4 a 10-high tower
+    #: leans further with every cube and falls; 0.2 holds it (2.5 mrad at the top) at
+    #: the same cost per step; below 0.2 SAP's answers turn erratic now and then (a
+    #: laid-out tower blew apart at 0.1 and 0.15). docs/world.md has the measurements.
+    sap_near_rigid_threshold: float = 0.2
     contact_approximation: str = "sap"  # "lagged" (Drake's default) lets a tower slide apart
     finger_kp: float = 1000.0  # N/m; with the fingers commanded shut this squeezes ~20 N
     finger_kd: float = 20.0  # N s/m
     slot_radius: float = SLOT_RADIUS  # m: table slots on this arc around the base
+    slot_spacing: float = SLOT_SPACING  # m between neighbouring slots, at least
+    slot_spacing_max: float = SLOT_SPACING_MAX  # m between them, at most (few slots needed)
 
     @property
     def slots(self) -> tuple[tuple[float, float], ...]:
-        return make_slots(self.slot_radius)
+        """Every slot the table holds, at the closest spacing (:func:`make_slots`)."""
+        return make_slots(self.slot_radius, self.slot_spacing)
+
+    def slots_for(self, count: int) -> tuple[tuple[float, float], ...]:
+        """The ``count`` slots a problem needs, spread out (:func:`spread_slots`)."""
+        return spread_slots(count, self.slot_radius, self.slot_spacing, self.slot_spacing_max)
 
 
 @dataclass
@@ -140,14 +213,24 @@ def _add_grasp_frame(plant: MultibodyPlant, hand: ModelInstanceIndex) -> None:
     plant.AddFrame(FixedOffsetFrame("grasp", body_frame, X_HAND_GRASP, hand))
 
 
-def cube_models(blocks: Sequence[str]) -> dict[str, str]:
-    """Which cube model (key of :data:`CUBE_COLOURS`) each block gets: in sorted order."""
-    if len(blocks) > len(CUBE_COLOURS):
-        raise InputError(
-            f"{len(blocks)} blocks, but the world has {len(CUBE_COLOURS)} cubes "
-            f"({', '.join(CUBE_COLOURS.values())}): use at most {len(CUBE_COLOURS)} blocks"
-        )
-    return dict(zip(sorted(blocks), CUBE_COLOURS, strict=False))
+def _natural(name: str) -> list:
+    """Sort key that puts b2 before b10."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name)]
+
+
+def cube_colour(index: int) -> tuple[str, tuple[float, float, float]]:
+    """(name, RGB) of the ``index``-th cube colour: the eight named ones, then darker
+    shades whose hues step by the golden angle, so that any two stay apart."""
+    named = list(CUBE_COLOURS.items())
+    if index < len(named):
+        return named[index]
+    hue = (0.05 + 0.618034 * (index - len(named))) % 1.0
+    return f"dark hue {round(hue * 360)}", colorsys.hsv_to_rgb(hue, 0.7, 0.55)
+
+
+def cube_colours(blocks: Sequence[str]) -> dict[str, tuple[str, tuple[float, float, float]]]:
+    """Each block's colour (name, RGB): in natural order of the names (b2 before b10)."""
+    return {b: cube_colour(i) for i, b in enumerate(sorted(blocks, key=_natural))}
 
 
 def cube_directives(
@@ -159,12 +242,8 @@ def cube_directives(
     with ``poses`` each cube's ``default_free_body_pose`` is where it starts.
     """
     lines = ["directives:"]
-    for name, key in cube_models(blocks).items():
-        lines += [
-            "- add_model:",
-            f"    name: block_{name}",
-            f"    file: package://cake_drake/cubes/cube_{key}.sdf",
-        ]
+    for name in blocks:
+        lines += ["- add_model:", f"    name: block_{name}", f"    file: {CUBE_MODEL}"]
         if poses is not None and name in poses:
             X = poses[name]
             rpy = np.degrees(RollPitchYaw(X.rotation()).vector())
@@ -175,6 +254,27 @@ def cube_directives(
                 f"        rotation: !Rpy {{ deg: [{', '.join(repr(float(v)) for v in rpy)}] }}",
             ]
     return "\n".join(lines) + "\n" if len(lines) > 1 else "directives: []\n"
+
+
+def _paint_cubes(plant: MultibodyPlant, scene_graph: SceneGraph, cubes) -> None:
+    """Give every cube its colour (:func:`cube_colours`), for Meshcat and the camera."""
+    inspector = scene_graph.model_inspector()
+    source = plant.get_source_id()
+    for name, (_, rgb) in cube_colours(list(cubes)).items():
+        body = plant.GetBodyByName("cube", cubes[name])
+        frame = plant.GetBodyFrameIdOrThrow(body.index())
+        colour = Rgba(*rgb, 1.0)
+        for gid in inspector.GetGeometries(frame, Role.kIllustration):
+            illustration = IllustrationProperties(inspector.GetIllustrationProperties(gid))
+            illustration.UpdateProperty("phong", "diffuse", colour)
+            # Removed and assigned anew (kReplace warns that a visualizer may miss it).
+            scene_graph.RemoveRole(source, gid, Role.kIllustration)
+            scene_graph.AssignRole(source, gid, illustration)
+        for gid in inspector.GetGeometries(frame, Role.kPerception):
+            perception = PerceptionProperties(inspector.GetPerceptionProperties(gid))
+            perception.UpdateProperty("phong", "diffuse", colour)
+            scene_graph.RemoveRole(source, gid, Role.kPerception)
+            scene_graph.AssignRole(source, gid, perception)
 
 
 def add_world(
@@ -216,6 +316,7 @@ def add_world(
             actuator = plant.GetJointActuatorByName(f"panda_motor{i}", arm)
             actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
     plant.Finalize()
+    _paint_cubes(plant, scene_graph, cubes)
     _filter_robot_collisions(plant, scene_graph, arm, hand)
     _filter_cube_collisions(plant, scene_graph, cubes)
     return Scene(plant, scene_graph, arm, hand, cubes)
@@ -335,6 +436,12 @@ def make_control_plant(time_step: float = 0.0) -> MultibodyPlant:
 
 # --- cube placement ------------------------------------------------------------------
 
+#: m: every contact of a laid-out tower starts pressed this much. Laid out exactly
+#: touching, SAP sees no contact in the first step: the whole tower falls at once, its
+#: top sinks 20 mm in 0.2 s before it comes back, and a cube whose corner spheres sank
+#: that deep into the one below can stay there. Pressed 0.05 mm, it settles by 0.1 mm.
+LAYOUT_PRELOAD = 5e-5
+
 
 def layout(
     towers: Sequence[Sequence[str]], slots: Sequence[tuple[float, float]] = SLOTS
@@ -342,13 +449,14 @@ def layout(
     """World poses ``X_WB`` of every cube for towers given bottom to top, one slot each."""
     if len(towers) > len(slots):
         raise InputError(
-            f"{len(towers)} towers need more table slots than the world has ({len(slots)})"
+            f"{len(towers)} towers need more table slots than the table holds "
+            f"({len(slots)} on the arm's arc: world.slot_radius, world.slot_spacing)"
         )
     poses = {}
     for (x, y), tower in zip(slots, towers, strict=False):
         yaw = math.atan2(y, x)  # cube faces towards the robot
         for level, name in enumerate(tower):
-            z = CUBE_SIZE / 2 + level * CUBE_SIZE
+            z = CUBE_SIZE / 2 + level * CUBE_SIZE - (level + 1) * LAYOUT_PRELOAD
             poses[name] = RigidTransform(RollPitchYaw(0, 0, yaw), [x, y, z])
     return poses
 

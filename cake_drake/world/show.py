@@ -6,7 +6,7 @@ from pathlib import Path
 
 from pydrake.math import RigidTransform
 
-from cake_drake.world.scene import CUBE_COLOURS, cube_models, layout
+from cake_drake.world.scene import cube_colours, layout
 
 
 def show_problem(
@@ -21,7 +21,7 @@ def show_problem(
     stacks = towers(problem.init)
     poses = layout(stacks)
     blocks = sorted(problem.objects)
-    colours = {b: CUBE_COLOURS[k] for b, k in cube_models(blocks).items()}
+    colours = {b: name for b, (name, _) in cube_colours(blocks).items()}
     lines = []
     if render is not None:
         from cake_drake.world.render import Renderer, save_png
