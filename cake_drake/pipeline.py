@@ -45,7 +45,7 @@ from cake_drake.symbolic import (
 )
 from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.faults import Move, RandomFault, Slip, check_faults, resolve_random
-from cake_drake.world.scene import cube_models, layout
+from cake_drake.world.scene import layout
 
 #: A planner: ``(problem, time_limit) -> Plan`` (or a sequence of ground actions).
 Planner = Callable[[Problem, float | None], "Plan | Sequence[GroundAction]"]
@@ -194,7 +194,6 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
                 f"{style_domain}; task.domain is {task.domain})"
             ) from None
     view = blocksworld_view(problem)
-    cube_models(view.blocks)
     layout(towers(view.init), s.world.slots)
     planner = None
     if task.plan:
