@@ -146,12 +146,21 @@ def _replay(out: Path, row: dict, kp: list[float]) -> Replay:
 
 
 def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
-    """Run :func:`study` and write ``kd_comparison.png`` and ``gains.json`` to ``out``."""
-    table, results = study(base, kds, out)
-    with OutputDir(out) as staged:
-        comparison_plot(results, staged.path("kd_comparison.png"))
-        staged.write_json("gains.json", table)
-        staged.commit()
+    """Run :func:`study` and write ``kd_comparison.png`` and ``gains.json`` to ``out``
+    (and ``reference.npz``, the recorded reference, when the study recorded one).
+
+    The study works in a temporary folder; ``out`` is replaced whole at the end.
+    """
+    with tempfile.TemporaryDirectory(prefix="cake-drake-gains-") as tmp:
+        table, results = study(base, kds, Path(tmp))
+        with OutputDir(out) as staged:
+            recorded = Path(tmp) / "reference" / "trajectory.npz"
+            if recorded.exists():
+                shutil.copyfile(recorded, staged.path("reference.npz"))
+                table["reference"] = "reference.npz"
+            comparison_plot(results, staged.path("kd_comparison.png"))
+            staged.write_json("gains.json", table)
+            staged.commit()
     return table
 
 

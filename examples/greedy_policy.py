@@ -106,17 +106,7 @@ class GreedyTowerPolicy(LeafSystem):
         output.set_value(ActionCommand(done, action))
 
 
-def make(actions, problem: Problem, blocks: Sequence[str]) -> GreedyTowerPolicy:
-    """The factory a scenario names; the planner's ``actions`` are not used."""
-    # Body indices in the plant: the world adds one free body per block, after the
-    # robot's, in the order of ``blocks`` (see cake_drake.world.scene.add_world).
-    return GreedyTowerPolicy(problem, dict(zip(blocks, _body_indices(blocks), strict=True)))
-
-
-def _body_indices(blocks: Sequence[str]) -> list[int]:
-    from pydrake.systems.framework import DiagramBuilder
-
-    from cake_drake.world.scene import WorldConfig, add_world
-
-    scene = add_world(DiagramBuilder(), list(blocks), WorldConfig(time_step=0.0))
-    return [int(scene.cube_body(b).index()) for b in blocks]
+def make(context) -> GreedyTowerPolicy:
+    """The factory a scenario names (a :class:`cake_drake.systems.SourceContext`): the
+    planner's actions are not used, the goal and the cubes' places in the plant are."""
+    return GreedyTowerPolicy(context.problem, dict(context.world.cube_bodies))

@@ -97,13 +97,17 @@ def test_same_inputs_same_plan_and_trajectory():
 
 
 def test_unreachable_cube_is_exit_3_naming_the_action(tmp_path):
-    # 0.9 m: on the table, out of reach
-    r = cli("--slot-radius", "0.9", "--out", str(tmp_path), "--no-render")
+    # 0.9 m: on the table, out of reach. Open loop, IK fails at the first action; the
+    # monitor sees it in the world before the arm moves.
+    r = cli("--slot-radius", "0.9", "--out", str(tmp_path / "a"), "--no-render", "--no-monitor")
     assert r.returncode == 3
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
     assert "action 1 (unstack a b)" in r.stderr and "pre-grasp" in r.stderr
-    summary = json.loads((tmp_path / "summary.json").read_text())
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["success"] is False and "unstack a b" in summary["error"]
+    r = cli("--slot-radius", "0.9", "--out", str(tmp_path / "b"), "--no-render")
+    assert r.returncode == 3 and r.stderr.count("\n") == 1
+    assert "cannot be recovered" in r.stderr and "out of the arm's reach" in r.stderr
 
 
 @pytest.mark.parametrize(
@@ -149,7 +153,7 @@ def test_collisions_are_reported_and_avoided_on_a_crowded_table(tmp_path):
     # Slots 0.4 m from the base stand 10 cm apart: the 20 cm-wide hand reaching for c
     # sweeps through the d-e tower. The plan is fine symbolically; geometry is not.
     crowd = ("--slot-radius", "0.4", "--slot-spacing", "0.104")
-    crowded = cli(*crowd, "--out", str(tmp_path / "a"), "--no-render")
+    crowded = cli(*crowd, "--out", str(tmp_path / "a"), "--no-render", "--no-monitor")
     assert crowded.returncode == 3
     lines = crowded.stderr.strip().splitlines()
     assert any(

@@ -28,7 +28,7 @@ MARKER = ".cake_drake-outputs"
 KNOWN = {
     "plan.txt", "trajectory.npz", "final_state.png", "joint4_torque.png", "summary.json",
     "scenario.yaml", "replay.html", "kd_comparison.png", "gains.json", "problem.pddl",
-    "report.md", MARKER,
+    "report.md", "reference.npz", MARKER,
 }  # fmt: skip
 _LEFTOVER = re.compile(r"^\.(?P<name>.+)\.(staging|old)-(?P<pid>\d+)$")
 
