@@ -233,10 +233,10 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
 SECONDS_PER_ACTION = 1.9
 
 
-def resolve_faults(faults, blocks, n_actions: int, seed: int = 0) -> list:
+def resolve_faults(faults, blocks, n_actions: int, seed: int = 0, slots=()) -> list:
     """The scenario's faults with seeds drawn, checked against the plan (before simulating)."""
     out = [
-        resolve_random(f, blocks, n_actions, SECONDS_PER_ACTION * n_actions, seed)
+        resolve_random(f, blocks, n_actions, SECONDS_PER_ACTION * n_actions, seed, slots)
         if isinstance(f, RandomFault)
         else f
         for f in faults
@@ -379,7 +379,7 @@ def run(
                 )
 
         t = time.perf_counter()
-        faults = resolve_faults(scenario.faults, blocks, plan.length, scenario.seed)
+        faults = resolve_faults(scenario.faults, blocks, plan.length, scenario.seed, slots)
         planner = checked.planner or PLANNER_REGISTRY[DEFAULT_PLANNER]
         cake = build_diagram(
             scenario,

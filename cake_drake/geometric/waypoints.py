@@ -34,6 +34,9 @@ from cake_drake.world.scene import CUBE_SIZE, SLOTS
 
 PICK_ACTIONS = ("pick-up", "unstack")
 PLACE_ACTIONS = ("put-down", "stack")
+#: A cube whose centre is farther than this from the grasp frame is not in the hand.
+IN_HAND = 0.03  # m
+
 PHASES = ("pre-grasp", "grasp", "lift", "transport", "place", "retract")
 
 
@@ -157,12 +160,18 @@ def waypoints_for(
             x, y = free_slot(poses, block, params, world.slots)
             target = np.array([x, y, CUBE_SIZE / 2 + params.place_drop])
             target_yaw = math.atan2(y, x)
-        # Where the cube sits in the hand, measured now: X_GB = X_WG^-1 X_WB.
+        # Where the cube sits in the hand, measured now: X_GB = X_WG^-1 X_WB. A cube that is
+        # not in the hand at all (it slipped, or someone took it) says nothing about the
+        # grasp: the hand then goes through the motions with the nominal grasp, and the
+        # world, measured after the action, shows what happened.
         X_GB = world.X_WG.inverse() @ poses[block]
+        in_hand = np.linalg.norm(X_GB.translation()) < IN_HAND
+        if not in_hand:
+            X_GB = RigidTransform(RotationMatrix.MakeXRotation(math.pi), [0.0, 0.0, 0.0])
         # Cube yaw that is a quarter turn of the target's, with the gripper yaw nearest
         # to the comfortable one.
         preferred = math.atan2(target[1], target[0]) + params.yaw_turns * math.pi / 2
-        grip_minus_cube = _yaw(world.X_WG) - face_yaw(poses[block])
+        grip_minus_cube = _yaw(world.X_WG) - face_yaw(poses[block]) if in_hand else 0.0
         cube_yaw = _nearest_turn(target_yaw, preferred - grip_minus_cube)
         X_WB_target = RigidTransform(RotationMatrix.MakeZRotation(cube_yaw), target)
         X_place = X_WB_target @ X_GB.inverse()

@@ -118,10 +118,12 @@ def check_faults(faults, blocks, n_actions: int) -> None:
 
 
 def resolve_random(
-    fault: RandomFault, blocks, n_actions: int, makespan: float, seed: int = 0
+    fault: RandomFault, blocks, n_actions: int, makespan: float, seed: int = 0, avoid=()
 ) -> FaultConfig:
     """The fault a seed stands for (the fault's own, else ``seed``): kind, cube, time
-    (within the first 80 % of the expected run) or action, and where a moved cube goes."""
+    (within the first 80 % of the expected run) or action, and where a moved cube goes
+    (on the table, clear of the table slots in ``avoid`` by 10 cm: a cube set down onto
+    a tower would be a different fault)."""
     rng = random.Random(f"fault-{seed if fault.seed is None else fault.seed}")
     kind = rng.choice(["slip", "knock", "move"])
     if kind == "slip":
@@ -133,7 +135,7 @@ def resolve_random(
     while True:  # a free spot on the table within the arm's comfortable reach
         r, a = rng.uniform(0.45, 0.65), rng.uniform(-1.0, 1.0)
         x, y = round(r * math.cos(a), 3), round(r * math.sin(a), 3)
-        if _place_ok(x, y):
+        if _place_ok(x, y) and all(math.hypot(x - sx, y - sy) > 0.1 for sx, sy in avoid):
             return Move(cube, t, x, y)
 
 
