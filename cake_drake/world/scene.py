@@ -43,7 +43,7 @@ from cake_drake.errors import InputError
 
 CUBE_SIZE = 0.04  # m, edge of every cube
 #: Every block is an instance of this one model; its colour is set per instance.
-CUBE_MODEL = "package://cake_drake/cubes/cube.sdf"
+CUBE_MODEL = "package://cake_drake/cubes/cube.urdf"
 #: The first eight cube colours, by name (blocks take colours in natural order of their
 #: names: for a..e, block a is the red cube). Further cubes take :func:`cube_colour`'s.
 CUBE_COLOURS: dict[str, tuple[float, float, float]] = {
