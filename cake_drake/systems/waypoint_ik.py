@@ -120,6 +120,7 @@ class WaypointIk(LeafSystem):
         self._ik = ik
         self._indices = world
         self._motion = motion
+        self._last_key, self._last_value = None, None
         self._action_port = self.DeclareAbstractInputPort(
             "action", AbstractValue.Make(ActionCommand(0, None))
         )
@@ -245,13 +246,22 @@ class WaypointIk(LeafSystem):
     def _trajectory(self, context) -> JointTrajectory:
         return context.get_abstract_state(self._state_index).get_value().trajectory
 
+    def _evaluate(self, context):
+        """q, v, a now. Two ports read them at every step: the last answer is kept, keyed
+        by the time and the trajectory (state is immutable, so equal keys, equal values)."""
+        traj, t = self._trajectory(context), context.get_time()
+        key = (t, id(traj), len(traj.segments))
+        if self._last_key != key:
+            self._last_key, self._last_value = key, traj.evaluate(t)
+        return self._last_value
+
     def _calc_desired_state(self, context, output) -> None:
-        q, v, _ = self._trajectory(context).evaluate(context.get_time())
+        q, v, _ = self._evaluate(context)
         out = output.get_mutable_value()
         out[:7], out[7:] = q, v
 
     def _calc_acceleration(self, context, output) -> None:
-        output.SetFromVector(self._trajectory(context).evaluate(context.get_time())[2])
+        output.SetFromVector(self._evaluate(context)[2])
 
     def _calc_finger_state(self, context, output) -> None:
         g, rate, _, _ = self._trajectory(context).labels(context.get_time())
