@@ -1,11 +1,6 @@
-"""Validate a plan against a PDDL problem, VAL-style.
+"""``python -m cake_drake.validate``: check a plan against a problem (see ``--help``).
 
-Applies the plan's actions from the initial state. Names the first step that
-is not applicable with its unmet preconditions (or that is not an action of
-the domain), or else the goal facts left unmet at the end. Accepts plan.txt,
-pyperplan's .soln and Fast Downward's sas_plan.
-
-exit codes: 0 valid; 1 invalid; 2 bad input (unreadable or malformed files).
+The argument parsing and the command live in :mod:`cake_drake.cli`.
 """
 
 import sys
