@@ -58,8 +58,18 @@ class IkError(ExecutionError):
     """Inverse kinematics found no joint configuration for a named waypoint."""
 
 
+#: The signal that stopped the run, once one has: an interrupt raised inside a Drake
+#: callback can come back out of it as another exception (pybind11 reports a failed
+#: argument conversion as a TypeError), and is an interrupt all the same.
+_signalled: list[str] = []
+
+
 def _terminate(signum, frame) -> None:
-    raise KeyboardInterrupt("SIGTERM")
+    import signal
+
+    name = signal.Signals(signum).name
+    _signalled.append(name)
+    raise KeyboardInterrupt(name)
 
 
 def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = None) -> int:
@@ -71,29 +81,42 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     """
     import signal
 
-    previous = signal.getsignal(signal.SIGTERM)
+    caught = (signal.SIGTERM, signal.SIGINT)
+    previous = {s: signal.getsignal(s) for s in caught}
     try:
-        signal.signal(signal.SIGTERM, _terminate)
+        for s in caught:
+            signal.signal(s, _terminate)
     except ValueError:  # not the main thread: leave signals alone
-        previous = None
+        previous = {}
+    _signalled.clear()
     try:
         return main(argv)
     except CakeDrakeError as e:
         print(f"error: {e}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt as e:
-        how = " by SIGTERM" if str(e) == "SIGTERM" else ""
-        print(f"error: interrupted{how}; nothing was written", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return _interrupted(str(e))
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         return EXIT_OK
     except OSError as e:
+        if _signalled:
+            return _interrupted(_signalled[0])
         where = f"{e.filename}: " if e.filename else ""
         print(f"error: {where}{e.strerror or e}; nothing was written", file=sys.stderr)
         return EXIT_OUTPUT_FAILED
+    except Exception:
+        if _signalled:  # the interrupt, reported by the callback it landed in as this
+            return _interrupted(_signalled[0])
+        raise
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def _interrupted(name: str) -> int:
+    how = " by SIGTERM" if name == "SIGTERM" else ""
+    print(f"error: interrupted{how}; nothing was written", file=sys.stderr)
+    return EXIT_INTERRUPTED

@@ -125,7 +125,7 @@ def execute(
     cake: CakeDiagram,
     max_sim_s: float = 300.0,
     settle_s: float = 0.3,
-    chunk_s: float = 0.25,
+    chunk_s: float = 0.05,
     progress: ProgressBar | None = None,
     moves=(),
 ) -> Execution:

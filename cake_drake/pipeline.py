@@ -107,6 +107,7 @@ def _check_numbers(s: Scenario) -> None:
     _range(t.velocity_fraction, 0.01, 1.0, "motion.timing.velocity_fraction")
     _range(t.acceleration_fraction, 0.01, 1.0, "motion.timing.acceleration_fraction")
     _range(t.gentle, 0.01, 1.0, "motion.timing.gentle")
+    _range(t.blend, 0.0, 0.5, "motion.timing.blend")
     _range(t.min_move, 0.0, 10.0, "motion.timing.min_move", " s")
     _range(t.gripper_time, 0.01, 10.0, "motion.timing.gripper_time", " s")
     _range(t.settle_time, 0.0, 10.0, "motion.timing.settle_time", " s")

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 from cake_drake.dynamic.analysis import settling, stationary_samples
+from cake_drake.dynamic.controllers import JointPd
 from cake_drake.gains import study
 from cake_drake.geometric.trajectory import PHASE_NAMES
 from cake_drake.outputs.report import gravity_torques
+from cake_drake.pipeline import run
 from cake_drake.scenario import Recorded, Scenario
 from cake_drake.world.scene import make_control_plant
 
@@ -21,8 +23,15 @@ J4 = 3  # joint 4, zero-based
 
 
 @pytest.fixture(scope="module")
-def replays(position_run):
-    out, _ = position_run
+def replays(tmp_path_factory):
+    """The study's replays of a position run whose moves stop at every waypoint
+    (``blend: 0``): the claims are about the moves themselves, and a blend would mix
+    the end of one vertical move into the swing that follows it."""
+    out = tmp_path_factory.mktemp("unblended")
+    recorded = Scenario(controller=JointPd())
+    recorded.motion.timing.blend = 0.0
+    recorded.outputs.folder, recorded.outputs.render = str(out), False
+    assert run(recorded).success
     base = Scenario(reference=Recorded(str(out / "trajectory.npz")))
     table, results = study(base, [20.0, 5.0])
     return table, results

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -87,20 +89,76 @@ def test_each_move_is_as_fast_as_the_limits_allow(trajectory):
         assert max(v_ratio.max(), a_ratio.max()) == pytest.approx(1.0, rel=1e-9)
 
 
-def test_rest_at_every_waypoint_and_derivatives_consistent(trajectory, samples):
-    for seg in trajectory.segments:
-        for t in (seg.t0, seg.t0 + seg.duration):
-            _, v, a = trajectory.evaluate(t)
-            assert np.allclose(v, 0, atol=1e-12) and np.allclose(a, 0, atol=1e-12)
+def test_rest_where_the_arm_must_stop_and_derivatives_consistent(trajectory, samples):
+    """Still before and after every hold (the fingers close or open there) and at the
+    ends; q, q-dot and q-double-dot continuous everywhere, blends included."""
+    segs = trajectory.segments
+    stops = {segs[0].t0, segs[-1].end}
+    for seg in segs:
+        if not seg.moves:
+            stops |= {seg.t0, seg.end}
+    for t in stops:
+        _, v, a = trajectory.evaluate(t)
+        assert np.allclose(v, 0, atol=1e-12) and np.allclose(a, 0, atol=1e-12)
     # qd and qdd are the derivatives of q and qd (central differences).
     q, qd, qdd = samples["q"], samples["qd"], samples["qdd"]
     np.testing.assert_allclose((q[2:] - q[:-2]) / (2 * DT), qd[1:-1], atol=5e-3)
     np.testing.assert_allclose((qd[2:] - qd[:-2]) / (2 * DT), qdd[1:-1], atol=0.1)
 
 
+def test_consecutive_moves_blend_and_holds_do_not(trajectory):
+    pairs = list(itertools.pairwise(trajectory.segments))
+    blended = [(a, b) for a, b in pairs if b.t0 < a.end - 1e-12]
+    assert blended, "no two consecutive moves overlap"
+    for a, b in blended:
+        assert a.moves and b.moves
+        assert a.end - b.t0 <= TIMING.blend * min(a.duration, b.duration) + 1e-12
+    for a, b in pairs:
+        if not a.moves or not b.moves:
+            assert b.t0 == pytest.approx(a.end, abs=1e-12)
+
+
+def test_blending_saves_time_and_zero_blend_stops_everywhere(limits):
+    lower, upper = limits
+    rng = np.random.default_rng(5)
+    qs = [rng.uniform(lower + 0.01, upper - 0.01) for _ in range(6)]
+    ends = {}
+    for blend in (0.0, 0.5):
+        timing = Timing(blend=blend)
+        traj = JointTrajectory(Q_HOME.copy(), Kinematics().limits)
+        for q in qs:
+            traj.move(q, "transport", 0, timing)
+        ends[blend] = traj.end_time
+        if blend == 0.0:
+            assert ends[0.0] == pytest.approx(sum(s.duration for s in traj.segments))
+    assert ends[0.5] < ends[0.0] * 0.95
+
+
+def test_a_move_appended_later_never_starts_in_the_past():
+    """Appended while the last move is running (the next step, planned once the last
+    move may be blended into), the next move starts at the present at the earliest;
+    appended after the end, the arm holds still until the present."""
+    traj = JointTrajectory(Q_HOME.copy(), Kinematics().limits)
+    traj.move(Q_HOME + 0.5, "transport", 0, TIMING)
+    ready = traj.ready_time(TIMING.blend)
+    assert traj.segments[-1].t0 < ready < traj.end_time
+    now = traj.end_time - 0.01  # a little after it became ready
+    later = traj.copy()
+    later.resume_at(now, "idle", -1)
+    later.move(Q_HOME, "pre-grasp", 1, TIMING)
+    assert now <= later.segments[-1].t0 < traj.end_time
+    after = traj.copy()
+    after.resume_at(traj.end_time + 0.3, "idle", -1)
+    after.move(Q_HOME, "pre-grasp", 1, TIMING)
+    assert not after.segments[-2].moves
+    assert after.segments[-1].t0 == pytest.approx(traj.end_time + 0.3)
+
+
 def test_jerk_is_bounded_by_the_quintic_peak(trajectory, samples):
-    """Finite-difference jerk never exceeds the largest segment's 60 d / T^3."""
-    bound = max(60 * np.max(np.abs(s.q1 - s.q0)) / s.duration**3 for s in trajectory.segments)
+    """Finite-difference jerk never exceeds twice the largest segment's 60 d / T^3 (two
+    moves at most are summed where they blend)."""
+    segs = trajectory.segments
+    bound = 2 * max(60 * np.max(np.abs(s.q1 - s.q0)) / s.duration**3 for s in segs)
     jerk = np.diff(samples["qdd"], axis=0) / DT
     assert np.all(np.isfinite(jerk))
     assert np.max(np.abs(jerk)) <= bound * 1.001

@@ -1,12 +1,18 @@
 """Joint trajectories: straight lines in joint space between IK solutions, timed smoothly.
 
-Each move is a quintic (minimum-jerk) blend from rest to rest, so velocity and
-acceleration are zero at every waypoint and the jerk is bounded. Its duration is the
-shortest that keeps every joint within ``velocity_fraction`` of its velocity limit and
-``acceleration_fraction`` of its acceleration limit (both read from the plant, which has
-them from the robot's URDF) (the quintic peaks at
-1.875 d/T in velocity and 10/sqrt(3) d/T^2 in acceleration for a distance d).
-Gripper closing and opening are holds of ``gripper_time`` seconds.
+Each move is a quintic (minimum-jerk) profile, velocity and acceleration zero at both
+ends, so the jerk is bounded. Its duration is the shortest that keeps every joint within
+``velocity_fraction`` of its velocity limit and ``acceleration_fraction`` of its
+acceleration limit (both read from the plant, which has them from the robot's URDF) (the
+quintic peaks at 1.875 d/T in velocity and 10/sqrt(3) d/T^2 in acceleration for a
+distance d). Gripper closing and opening are holds of ``gripper_time`` seconds.
+
+A waypoint that needs no stop (no gripper change, nothing to measure there) is blended
+through: the next move starts before the last one ends and the two are summed
+(superposition blending, as industrial controllers do), so the arm rounds the corner
+instead of stopping at it. The overlap is ``blend`` of the shorter move at most, and
+shrunk until the sum keeps within the same velocity and acceleration bounds; position,
+velocity and acceleration stay continuous. At most two moves are ever summed.
 
 ``trajectory.npz`` (see :func:`save_npz`) holds, per sample:
 ``t`` (s), ``q``, ``qd``, ``qdd`` (7 arm joints: rad, rad/s, rad/s^2), ``gripper``
@@ -52,24 +58,31 @@ class JointLimits:
 class Timing:
     """How fast the arm may move (the ``motion.timing`` section of a scenario).
 
-    Free-space moves (pre-grasp, lift, transport) use ``velocity_fraction`` and
-    ``acceleration_fraction`` of the robot's limits; the moves that start or end
-    beside a cube or a tower (grasp, place, retract) are ``gentle`` times that, so an
-    overshoot there stays small.
+    Moves use ``velocity_fraction`` and ``acceleration_fraction`` of the robot's limits
+    (Franka's datasheet values, in the URDF): by default all of it, which the reference
+    never exceeds, blends included. The moves that start or end beside a cube or a tower
+    (``gentle_phases``) use ``gentle`` times that: below 1 for a slower approach.
     """
 
-    velocity_fraction: float = 0.8
-    acceleration_fraction: float = 0.7
-    gentle: float = 0.7
+    velocity_fraction: float = 1.0
+    acceleration_fraction: float = 1.0
+    gentle: float = 1.0
     gentle_phases: list[str] = field(default_factory=lambda: ["grasp", "place", "retract"])
-    min_move: float = 0.2  # s, shortest move
+    #: Fraction of the shorter of two consecutive moves by which the second may start
+    #: before the first ends (0 = stop at every waypoint; at most 0.5).
+    blend: float = 0.5
+    min_move: float = 0.1  # s, shortest move
     gripper_time: float = 0.2  # s, a close or an open (the fingers' 0.2 m/s limit)
     settle_time: float = 0.05  # s, still before the fingers close or open
+
+    def scale(self, phase: str) -> float:
+        """The fraction of the limits' fractions that moves of ``phase`` use."""
+        return self.gentle if phase in self.gentle_phases else 1.0
 
     def move_duration(
         self, q0: np.ndarray, q1: np.ndarray, limits: JointLimits, phase: str = "transport"
     ) -> float:
-        scale = self.gentle if phase in self.gentle_phases else 1.0
+        scale = self.scale(phase)
         d = np.abs(np.asarray(q1) - np.asarray(q0))
         t_v = _V_PEAK * d / (scale * self.velocity_fraction * limits.velocity)
         t_a = np.sqrt(_A_PEAK * d / (scale * self.acceleration_fraction * limits.acceleration))
@@ -90,8 +103,30 @@ class Segment:
     def __deepcopy__(self, memo):  # immutable: share, do not copy
         return self
 
+    @property
+    def end(self) -> float:
+        return self.t0 + self.duration
 
-def _quintic(tau: float) -> tuple[float, float, float]:
+    @property
+    def moves(self) -> bool:
+        return bool(np.any(self.q1 != self.q0))
+
+    def at(self, t):
+        """Displacement from ``q0``, velocity and acceleration at ``t`` (scalar or array)."""
+        dq = self.q1 - self.q0
+        if isinstance(t, float):
+            s, ds, dds = _quintic(min(max((t - self.t0) / self.duration, 0.0), 1.0))
+            return s * dq, (ds / self.duration) * dq, (dds / self.duration**2) * dq
+        tau = np.clip((np.asarray(t, float) - self.t0) / self.duration, 0.0, 1.0)
+        s, ds, dds = _quintic(tau)
+        return (
+            np.multiply.outer(s, dq),
+            np.multiply.outer(ds / self.duration, dq),
+            np.multiply.outer(dds / self.duration**2, dq),
+        )
+
+
+def _quintic(tau):
     t2 = tau * tau
     s = t2 * tau * (10 - 15 * tau + 6 * t2)
     ds = 30 * t2 * (1 - 2 * tau + t2)
@@ -111,12 +146,34 @@ class JointTrajectory:
     start_time: float = 0.0
     segments: list[Segment] = field(default_factory=list)
     _starts: list[float] = field(default_factory=list)
+    #: No move appended from now on may start before this time (see :meth:`resume_at`).
+    earliest: float = -np.inf
 
     def copy(self) -> "JointTrajectory":
         """A new trajectory sharing the (immutable) segments, to append to."""
         return JointTrajectory(
-            self.start_q, self.limits, self.start_time, list(self.segments), list(self._starts)
+            self.start_q,
+            self.limits,
+            self.start_time,
+            list(self.segments),
+            list(self._starts),
+            self.earliest,
         )
+
+    def resume_at(self, t: float, phase: str, action: int) -> None:
+        """Appending at time ``t`` (the present): past the end, hold still until ``t``;
+        before it, the next move may blend into the last one, but not start before ``t``."""
+        if t > self.end_time:
+            self.hold(t - self.end_time, phase, action)
+        self.earliest = t
+
+    def ready_time(self, blend: float) -> float:
+        """When the next move may start: the end, or before it when the last segment is a
+        move the next one can blend into (``blend`` of its duration before)."""
+        last = self.segments[-1] if self.segments else None
+        if last is None or not last.moves:
+            return self.end_time
+        return self.end_time - blend * last.duration
 
     def assign(self, other: "JointTrajectory") -> None:
         """Take ``other``'s segments (a copy of this one, extended)."""
@@ -136,9 +193,9 @@ class JointTrajectory:
     def end_gripper(self) -> float:
         return self.segments[-1].gripper if self.segments else GRIPPER_OPEN
 
-    def _append(self, duration, q1, phase, action, gripper) -> None:
+    def _append(self, duration, q1, phase, action, gripper, t0=None) -> None:
         seg = Segment(
-            self.end_time,
+            self.end_time if t0 is None else t0,
             duration,
             self.end_q,
             np.asarray(q1, float),
@@ -151,14 +208,38 @@ class JointTrajectory:
         self._starts.append(seg.t0)
 
     def move(self, q1, phase: str, action: int, timing: Timing) -> None:
-        """Quintic move from the current end to ``q1``; the gripper keeps its command."""
-        self._append(
-            timing.move_duration(self.end_q, q1, self.limits, phase),
-            q1,
-            phase,
-            action,
-            self.end_gripper,
-        )
+        """Quintic move from the current end to ``q1``; the gripper keeps its command.
+        When the last segment is a move too, this one blends into it (see the module)."""
+        q1 = np.asarray(q1, float)
+        duration = timing.move_duration(self.end_q, q1, self.limits, phase)
+        end = self.end_time
+        overlap = self._overlap(q1, duration, phase, timing)
+        self._append(duration, q1, phase, action, self.end_gripper, end - overlap)
+
+    def _overlap(self, q1, duration: float, phase: str, timing: Timing) -> float:
+        """The longest overlap with the last move (up to ``timing.blend`` of the shorter
+        one, not before :attr:`earliest`) whose sum keeps within both moves' bounds."""
+        last = self.segments[-1] if self.segments else None
+        if last is None or not last.moves or timing.blend <= 0:
+            return 0.0
+        longest = min(timing.blend * min(last.duration, duration), last.end - self.earliest)
+        if longest <= 0:
+            return 0.0
+        prev_phase = PHASE_NAMES[last.phase]
+        scale = min(timing.scale(phase), timing.scale(prev_phase))
+        v_max = scale * timing.velocity_fraction * self.limits.velocity
+        a_max = scale * timing.acceleration_fraction * self.limits.acceleration
+        for k in range(8, 0, -1):  # the longest of 8/8 .. 1/8 of it that keeps the bounds
+            overlap = longest * k / 8
+            nxt = Segment(last.end - overlap, duration, last.q1, q1, 0, 0, 0.0, 0.0)
+            ts = np.linspace(nxt.t0, last.end, 33)
+            _, v0, a0 = last.at(ts)
+            _, v1, a1 = nxt.at(ts)
+            if np.all(np.abs(v0 + v1) <= v_max * (1 + 1e-9)) and np.all(
+                np.abs(a0 + a1) <= a_max * (1 + 1e-9)
+            ):
+                return overlap
+        return 0.0
 
     def hold(self, duration: float, phase: str, action: int, gripper: float | None = None) -> None:
         """Stay still for ``duration``; the finger command ramps to ``gripper`` meanwhile.
@@ -177,14 +258,17 @@ class JointTrajectory:
 
     def evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, q-dot, q-double-dot at time ``t`` (held at the ends)."""
-        seg = self._segment(t)
-        if seg is None:
+        if not self.segments or t < self.start_time:
             q = np.asarray(self.start_q, float)
             return q, np.zeros_like(q), np.zeros_like(q)
-        tau = min(max((t - seg.t0) / seg.duration, 0.0), 1.0)
-        s, ds, dds = _quintic(tau)
-        dq = seg.q1 - seg.q0
-        return seg.q0 + s * dq, dq * (ds / seg.duration), dq * (dds / seg.duration**2)
+        i = max(bisect.bisect_right(self._starts, t) - 1, 0)
+        seg = self.segments[i]
+        q, v, a = seg.at(t)
+        prev = self.segments[i - 1] if i > 0 else None
+        if prev is not None and t < prev.end:  # blending: the last move is still running
+            q0, v0, a0 = prev.at(t)
+            return prev.q0 + q0 + q, v0 + v, a0 + a
+        return seg.q0 + q, v, a
 
     def labels(self, t: float) -> tuple[float, float, int, int]:
         """(finger command, its rate, phase index, action index) at time ``t``."""

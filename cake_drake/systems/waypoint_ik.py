@@ -161,7 +161,8 @@ class WaypointIk(LeafSystem):
             return
         t = context.get_time()
         if prog.working >= 0:
-            if t >= prog.trajectory.end_time - 1e-9:
+            # Done (or ready for the next step) once the last move may be blended into.
+            if t >= prog.trajectory.ready_time(self._motion.timing.blend) - 1e-9:
                 if prog.pending is not None:
                     new = self._refine(context, prog, t)
                 else:
@@ -172,8 +173,7 @@ class WaypointIk(LeafSystem):
         if cmd.action is None or cmd.index != prog.done:
             return
         traj = prog.trajectory.copy()
-        if t > traj.end_time:
-            traj.hold(t - traj.end_time, "idle", -1)
+        traj.resume_at(t, "idle", -1)
         m = self._motion
         try:
             action = m.meaning(cmd.action)
@@ -223,8 +223,7 @@ class WaypointIk(LeafSystem):
         (:func:`cake_drake.geometric.solve.release_action`)."""
         action, own_name, params, X_place = prog.pending
         traj = prog.trajectory.copy()
-        if t > traj.end_time:
-            traj.hold(t - traj.end_time, "transport" if X_place is None else "place", prog.working)
+        traj.resume_at(t, "transport" if X_place is None else "place", prog.working)
         world = self._world(context, prog.held)
         m = self._motion
         try:
