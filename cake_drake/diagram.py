@@ -131,7 +131,8 @@ def _add_reference(
     kinematics = Kinematics(scene.control_plant)
     solver = TimedSolver(make_solver(scenario.motion.ik, kinematics, scenario.seed))
     motion = scenario.motion
-    checker = CollisionChecker(list(scene.cubes)) if motion.collision_check else None
+    # Checks in the simulation's own world (bound once the Diagram is built).
+    checker = CollisionChecker(list(scene.cubes), scene=scene) if motion.collision_check else None
     indices = WorldIndices(
         cube_bodies={n: int(scene.cube_body(n).index()) for n in scene.cubes},
         hand_body=int(plant.GetBodyByName("panda_hand", scene.hand).index()),
@@ -254,4 +255,6 @@ def build_diagram(
         add_visualization(builder, scene.scene_graph, meshcat)
     diagram = builder.Build()
     diagram.set_name("cake_drake")
+    if reference.waypoint_ik is not None and reference.waypoint_ik.checker is not None:
+        reference.waypoint_ik.checker.bind(diagram)
     return CakeDiagram(diagram, scene, scenario, reference, controller, loggers, solver)

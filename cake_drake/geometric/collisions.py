@@ -36,7 +36,7 @@ from pydrake.systems.framework import DiagramBuilder
 from cake_drake.errors import InputError
 from cake_drake.geometric.waypoints import PICK_ACTIONS, Waypoint, WorldView
 from cake_drake.symbolic import GroundAction
-from cake_drake.world.scene import CUBE_SIZE, WorldConfig, add_world
+from cake_drake.world.scene import CUBE_SIZE, Scene, WorldConfig, add_world
 
 #: Finger opening (m per finger) while no cube is held: wide open.
 FINGERS_OPEN = 0.04
@@ -76,6 +76,10 @@ class CollisionChecker:
 
     ``max_step`` (rad) bounds the joint motion between samples: 0.02 rad of joint 1 moves
     the hand ~1.2 cm at the slots' radius, well under a cube's 4 cm.
+
+    By default the checker builds a world of its own. Given the ``scene`` of a Diagram
+    being built, it checks in that world instead, in a context of its own, once
+    :meth:`bind` has been given the built Diagram: the models are parsed once.
     """
 
     def __init__(
@@ -83,15 +87,24 @@ class CollisionChecker:
         blocks: Sequence[str],
         max_step: float = 0.02,
         min_depth: float = 5e-4,
+        scene: Scene | None = None,
     ) -> None:
-        builder = DiagramBuilder()
-        scene = add_world(builder, list(blocks), WorldConfig(time_step=0.0))
-        self.scene = scene
         self.blocks = tuple(blocks)
         self.max_step = max_step
         self.min_depth = min_depth
-        self._diagram = builder.Build()
-        self._context = self._diagram.CreateDefaultContext()
+        self._context = None
+        if scene is None:
+            builder = DiagramBuilder()
+            self.scene = add_world(builder, list(blocks), WorldConfig(time_step=0.0))
+            self.bind(builder.Build())
+        else:
+            self.scene = scene
+
+    def bind(self, diagram) -> None:
+        """Check in ``diagram``, the built Diagram that holds :attr:`scene`."""
+        scene = self.scene
+        self._diagram = diagram
+        self._context = diagram.CreateDefaultContext()
         plant, scene_graph = scene.plant, scene.scene_graph
         self._plant_context = plant.GetMyMutableContextFromRoot(self._context)
         self._sg_context = scene_graph.GetMyContextFromRoot(self._context)
@@ -149,6 +162,8 @@ class CollisionChecker:
         cubes whose contacts are expected (the one being grasped). ``samples`` overrides
         the count from ``max_step``; ``fingers`` the finger opening (m per finger).
         """
+        if self._context is None:
+            raise RuntimeError("CollisionChecker.bind() was not called with the built Diagram")
         missing = [b for b in self.blocks if b not in cube_poses]
         if missing:
             raise InputError(

@@ -146,6 +146,11 @@ class WaypointIk(LeafSystem):
         self.DeclareVectorOutputPort("labels", 2, self._calc_labels, prerequisites_of_calc=timed)
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
+    @property
+    def checker(self) -> CollisionChecker | None:
+        """What the planned moves are checked with, if anything."""
+        return self._motion.checker
+
     def progress(self, context) -> Progress:
         return context.get_abstract_state(self._state_index).get_value()
 
