@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parent.parent
 FAULTS_5 = {
     "slip": Slip(6),
     "knock": Knock("d", 1.0),
-    "move": Move("c", 12.0, 0.5, -0.3),
+    "move": Move("c", 9.0, 0.35, -0.35),
 }
 
 
@@ -64,7 +64,7 @@ def test_a_generated_six_block_problem_recovers_from_a_moved_cube(tmp_path):
 def test_the_summary_and_the_message_tell_the_recovery(tmp_path):
     r = subprocess.run(
         [sys.executable, "-m", "cake_drake.run", "--quiet", "--no-render", "--out", str(tmp_path),
-         "--fault", "move:c@12:0.5,-0.3"],
+         "--fault", "move:c@9:0.35,-0.35"],
         capture_output=True, text=True, cwd=ROOT,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
@@ -72,7 +72,7 @@ def test_the_summary_and_the_message_tell_the_recovery(tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     event = summary["events"][0]
     assert event["kind"] in ("repeat", "replan") and "(on c d)" in event["missing"]
-    assert summary["faults"] == [{"kind": "Move", "cube": "c", "time": 12.0, "x": 0.5, "y": -0.3}]
+    assert summary["faults"] == [{"kind": "Move", "cube": "c", "time": 9.0, "x": 0.35, "y": -0.35}]
     assert len(summary["executed"]) > len(summary["plan"])
 
 

@@ -317,23 +317,22 @@ def add_world(
             actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
     plant.Finalize()
     _paint_cubes(plant, scene_graph, cubes)
-    _filter_robot_collisions(plant, scene_graph, arm, hand)
-    _filter_cube_collisions(plant, scene_graph, cubes)
+    robot = _filter_robot_collisions(plant, scene_graph, arm, hand)
+    _filter_cube_collisions(plant, scene_graph, cubes, robot)
     return Scene(plant, scene_graph, arm, hand, cubes)
 
 
 #: The model's eight support spheres sit 8 mm in from the edges of the bottom and top
-#: faces, reaching to those faces. :func:`_add_side_supports` gives the side faces the
-#: same, recessed a little (x faces 0.5 mm, y faces 1 mm): with every face's spheres
-#: reaching its plane, a cube rolling over an edge could come to rest balanced on it, on
-#: the two rows of spheres either side; recessed by different amounts it always falls
-#: onto the face whose spheres reach farthest.
-_SUPPORT_IN = 0.012
-_SIDE_REACH = (0.0175, 0.0170)  # sphere centres, x faces and y faces (radius 2 mm)
+#: faces, reaching to those faces. :func:`_add_side_supports` adds eight more at the
+#: cube's corners, reaching 0.5 mm short of every face: they never touch while the cube
+#: stands flat, carry it on whichever side face it is knocked onto, and on an edge they
+#: are two contacts on a line, so the cube balances there no more than a real one does
+#: and falls onto a face.
+_CORNER_REACH = 0.0175  # m, corner sphere centres on each axis (radius 2 mm)
 
 
 def _add_side_supports(plant: MultibodyPlant, body) -> None:
-    """Support spheres for the four side faces (see :data:`_SIDE_REACH`).
+    """Corner spheres for the side faces and the edges (see :data:`_CORNER_REACH`).
 
     A cube knocked over lands on a side face; with spheres only on its top and bottom it
     would sink into the table to its spheres (6 mm) and read as resting on nothing.
@@ -345,33 +344,19 @@ def _add_side_supports(plant: MultibodyPlant, body) -> None:
     props.AddProperty("material", "coulomb_friction", CoulombFriction(1.0, 1.0))
     props.AddProperty("material", "point_contact_stiffness", 1e6)
     props.AddProperty("material", "hunt_crossley_dissipation", 5.0)
-    # Edge spheres: a cube rolling over an edge would otherwise come to rest on the rows
-    # of inset spheres either side of it, as on a chamfer; with a sphere on each edge it
-    # balances on a line and falls onto a face, as a sharp-edged cube does. They touch
-    # the table only (see _filter_cube_collisions), so stacking is unchanged.
-    e = 0.0175  # 0.5 mm short of the faces: no contact while a cube stands flat
-    for i, (u, v) in enumerate(((0, 1), (0, 2), (1, 2))):
-        for su in (-e, e):
-            for sv in (-e, e):
-                p = [0.0, 0.0, 0.0]
-                p[u], p[v] = su, sv
-                name = f"edge_{i}{int(su > 0)}{int(sv > 0)}"
-                plant.RegisterCollisionGeometry(body, RigidTransform(p), Sphere(0.002), name, props)
-    for axis, reach in enumerate(_SIDE_REACH):
-        for sign in (-1.0, 1.0):
-            for a in (-_SUPPORT_IN, _SUPPORT_IN):
-                for b in (-_SUPPORT_IN, _SUPPORT_IN):
-                    p = [a, a, b]
-                    p[axis] = sign * reach
-                    p[1 - axis] = a
-                    name = f"corner_side_{axis}{int(sign > 0)}{int(a > 0)}{int(b > 0)}"
-                    plant.RegisterCollisionGeometry(
-                        body, RigidTransform(p), Sphere(0.002), name, props
-                    )
+    e = _CORNER_REACH
+    for x in (-e, e):
+        for y in (-e, e):
+            for z in (-e, e):
+                name = f"corner_outer_{int(x > 0)}{int(y > 0)}{int(z > 0)}"
+                plant.RegisterCollisionGeometry(
+                    body, RigidTransform([x, y, z]), Sphere(0.002), name, props
+                )
 
 
-def _filter_robot_collisions(plant, scene_graph, arm, hand) -> None:
-    """The robot never collides with itself, and its base sits on the table."""
+def _filter_robot_collisions(plant, scene_graph, arm, hand) -> GeometrySet:
+    """The robot never collides with itself, and its base sits on the table. Returns
+    the robot's collision geometries."""
     robot = GeometrySet()
     for instance in (arm, hand):
         for body_index in plant.GetBodyIndices(instance):
@@ -387,10 +372,12 @@ def _filter_robot_collisions(plant, scene_graph, arm, hand) -> None:
     manager = scene_graph.collision_filter_manager()
     manager.Apply(CollisionFilterDeclaration().ExcludeWithin(robot))
     manager.Apply(CollisionFilterDeclaration().ExcludeBetween(base, table_set))
+    return robot
 
 
-def _filter_cube_collisions(plant, scene_graph, cubes) -> None:
-    """Cubes rest on each other and on the table through corner spheres only.
+def _filter_cube_collisions(plant, scene_graph, cubes, robot: GeometrySet) -> None:
+    """Cubes rest on each other and on the table through corner spheres only; the robot
+    touches a cube's box only (the spheres lie within 0.5 mm of it).
 
     Box-on-box point contact has a single, jumping contact point and lets a tower slide
     apart; ball-on-ball contact between two cubes' corners is unstable. So a cube's
@@ -398,29 +385,19 @@ def _filter_cube_collisions(plant, scene_graph, cubes) -> None:
     the box), and boxes never touch boxes.
     """
     inspector = scene_graph.model_inspector()
-    faces, corners, edges = GeometrySet(), GeometrySet(), GeometrySet()
+    faces, corners = GeometrySet(), GeometrySet()
     for instance in cubes.values():
         body = plant.GetBodyByName("cube", instance)
         for gid in plant.GetCollisionGeometriesForBody(body):
             name = inspector.GetName(gid).rsplit("::", 1)[-1]
-            group = (
-                corners
-                if name.startswith("corner")
-                else edges
-                if name.startswith("edge")
-                else faces
-            )
-            group.Add(gid)
+            (corners if name.startswith("corner") else faces).Add(gid)
     table = plant.GetBodyByName("table_top", plant.GetModelInstanceByName("table"))
     table_set = GeometrySet(plant.GetCollisionGeometriesForBody(table))
     manager = scene_graph.collision_filter_manager()
     manager.Apply(CollisionFilterDeclaration().ExcludeWithin(corners))
     manager.Apply(CollisionFilterDeclaration().ExcludeWithin(faces))
     manager.Apply(CollisionFilterDeclaration().ExcludeBetween(faces, table_set))
-    # Edge spheres keep a fallen cube off its edges on the table and nothing else.
-    manager.Apply(CollisionFilterDeclaration().ExcludeWithin(edges))
-    manager.Apply(CollisionFilterDeclaration().ExcludeBetween(edges, faces))
-    manager.Apply(CollisionFilterDeclaration().ExcludeBetween(edges, corners))
+    manager.Apply(CollisionFilterDeclaration().ExcludeBetween(corners, robot))
 
 
 def make_control_plant(time_step: float = 0.0) -> MultibodyPlant:
