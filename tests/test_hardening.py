@@ -284,3 +284,20 @@ def test_a_goal_about_the_arm_is_judged_from_the_world(tmp_path):
     result = run(s, write=False)
     assert result.success, result.message
     assert ("arm-empty",) in result.execution.reading.facts
+
+
+def test_a_dead_output_helper_is_reported_not_waited_for(tmp_path):
+    """The plot's helper killed mid-run: waiting for it ends at once, naming it."""
+    from cake_drake.outputs.worker import OutputWorker
+
+    worker = OutputWorker(["a"], {}, render=False)
+    try:
+        worker._plot.process.kill()
+        worker._plot.process.join(5)
+        worker.submit_plot(path=tmp_path / "p.png")
+        t0 = time.monotonic()
+        with pytest.raises(RuntimeError, match="output helper stopped .* before writing the plot"):
+            worker.wait(timeout_s=30)
+        assert time.monotonic() - t0 < 5
+    finally:
+        worker.close()

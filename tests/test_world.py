@@ -245,3 +245,18 @@ def test_twelve_blocks_lay_out_and_render_each_in_its_own_colour():
         seen = seen / seen.sum()
         nearest = min(blocks, key=lambda o: np.linalg.norm(seen - chroma[o]))
         assert nearest == b, f"{b} ({colours[b][0]}) looks like {nearest} ({colours[nearest][0]})"
+
+
+def test_png_files_are_read_back_exactly(tmp_path):
+    """The picture's PNG writer (standard library only): any RGBA image round-trips."""
+    import matplotlib.image
+
+    from cake_drake.world.render import save_png
+
+    rng = np.random.default_rng(3)
+    rgba = rng.integers(0, 256, (37, 53, 4), dtype=np.uint8)
+    rgba[:10] = (200, 30, 30, 255)  # a flat run too
+    save_png(rgba, tmp_path / "x.png")
+    back = matplotlib.image.imread(tmp_path / "x.png")
+    np.testing.assert_array_equal((back * 255).round().astype(np.uint8), rgba)
+    assert not list(tmp_path.glob("*.part"))

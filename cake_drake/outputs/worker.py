@@ -1,12 +1,14 @@
-"""A second process for the slow outputs, so they overlap the simulation.
+"""Helper processes for the slow outputs, so they overlap the simulation.
 
 Loading the Panda's visual meshes into VTK and importing matplotlib together take
-about as long as simulating the whole task. The worker is forked at the start of a
-run; while the main process plans and simulates it builds its :class:`Renderer`,
-renders once (the meshes load then) and imports the plotting code. At the end it gets
-the final state and the logs, and writes ``final_state.png`` and the joint plot while
-the main process writes the rest. Where forking is not available, or the worker
-fails, the same functions run in-process.
+about as long as simulating the whole task. Two helpers are forked at the start of a
+run, one for the picture and one for the plot: while the main process plans and
+simulates, the first builds its :class:`Renderer` and renders once (the meshes load
+then), the second imports the plotting code. At the end they get the final state and
+the logs and write ``final_state.png`` and the joint plot side by side, while the main
+process writes the rest. Apart, each stays small (VTK and matplotlib never share a
+process). Where forking is not available, or a helper fails, the same functions run
+in-process.
 """
 
 from __future__ import annotations
@@ -40,7 +42,29 @@ def plot_png(job: dict) -> None:
     joint_plot(**job)
 
 
-def _serve(conn, parent_end, blocks, warm_poses, render: bool) -> None:
+def _warm_picture(blocks, warm_poses):
+    """Build the renderer and render once; returns the job handler."""
+    from cake_drake.world.render import Renderer
+
+    renderer = Renderer(blocks)
+    renderer.render(_unpack(warm_poses))
+
+    def handle(args) -> None:
+        poses, q_arm, fingers, path = args
+        render_png(blocks, _unpack(poses), q_arm, fingers, path, renderer)
+
+    return handle
+
+
+def _warm_plot():
+    """Import matplotlib and its fonts now, not at the end; returns the job handler."""
+    from cake_drake.outputs.plots import warm_up
+
+    warm_up()
+    return plot_png
+
+
+def _serve(conn, parent_end, warm, args, what: str) -> None:
     import signal
 
     # The fork copied the parent's end of the pipe too: close it, so that the parent's
@@ -49,16 +73,8 @@ def _serve(conn, parent_end, blocks, warm_poses, render: bool) -> None:
     # Ctrl-C reaches the whole process group: the parent decides, the helper stays quiet.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    renderer = None
     try:
-        if render:
-            from cake_drake.world.render import Renderer
-
-            renderer = Renderer(blocks)
-            renderer.render(_unpack(warm_poses))
-        from cake_drake.outputs.plots import warm_up
-
-        warm_up()  # matplotlib and its fonts load now, not at the end
+        handle = warm(*args)
     except Exception as e:  # noqa: BLE001 - reported to the parent as one line
         conn.send(("error", f"output worker failed to start: {e}"))
         return
@@ -69,94 +85,120 @@ def _serve(conn, parent_end, blocks, warm_poses, render: bool) -> None:
             return
         if job is None:
             return
-        kind, args = job
         try:
-            if kind == "render":
-                poses, q_arm, fingers, path = args
-                render_png(blocks, _unpack(poses), q_arm, fingers, path, renderer)
-            else:
-                plot_png(args)
-            conn.send(("ok", kind))
+            handle(job)
+            conn.send(("ok", what))
         except Exception as e:  # noqa: BLE001
-            conn.send(("error", f"writing the {kind} output failed: {e}"))
+            conn.send(("error", f"writing the {what} output failed: {e}"))
+
+
+class _Helper:
+    """One forked helper process and its pipe."""
+
+    def __init__(self, warm, args, what: str) -> None:
+        self.what = what
+        self.pending = 0
+        ctx = mp.get_context("fork")
+        self.conn, child = ctx.Pipe()
+        self.process = ctx.Process(
+            target=_serve, args=(child, self.conn, warm, args, what), daemon=True
+        )
+        self.process.start()
+        child.close()  # the helper's end lives in the helper alone
+
+    def submit(self, job) -> None:
+        self.pending += 1
+        try:
+            self.conn.send(job)
+        except OSError:  # the helper is gone: wait() says so
+            pass
+
+    def wait(self, deadline: float, timeout_s: float) -> str | None:
+        """Wait for every submitted job; the first error, if any (RuntimeError when the
+        helper died or did not answer by ``deadline``)."""
+        import time
+
+        error = None
+        while self.pending:
+            if not self.conn.poll(0.2):
+                if not self.process.is_alive():
+                    raise self._stopped()
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"the output helper did not answer in {timeout_s:g} s")
+                continue
+            try:
+                status, detail = self.conn.recv()
+            except EOFError:
+                raise self._stopped() from None
+            if status == "error":
+                error = error or detail
+                if "failed to start" in detail:
+                    break
+            self.pending -= 1
+        return error
+
+    def _stopped(self) -> RuntimeError:
+        self.process.join(1.0)
+        return RuntimeError(
+            f"the output helper stopped (exit code {self.process.exitcode}) "
+            f"before writing the {self.what}"
+        )
+
+    def close(self) -> None:
+        if self.process.is_alive():
+            try:
+                self.conn.send(None)
+            except OSError:
+                pass
+            self.process.join(timeout=5)
+            if self.process.is_alive():
+                self.process.terminate()
 
 
 class OutputWorker:
-    """Fork now with the blocks and initial poses; hand over render and plot jobs later."""
+    """Fork the helpers now, with the blocks and initial poses; hand over the picture and
+    the plot later."""
 
     def __init__(
         self, blocks: Sequence[str], initial_poses: Mapping[str, RigidTransform], render: bool
     ):
         self._blocks = list(blocks)
-        self._render = render
-        self._process = None
-        self._pending = 0
+        self._picture = self._plot = None
         try:
-            ctx = mp.get_context("fork")
-            self._conn, child = ctx.Pipe()
-            self._process = ctx.Process(
-                target=_serve,
-                args=(child, self._conn, self._blocks, _pack(initial_poses), render),
-                daemon=True,
-            )
-            self._process.start()
-            child.close()  # the helper's end lives in the helper alone
+            if render:
+                args = (self._blocks, _pack(initial_poses))
+                self._picture = _Helper(_warm_picture, args, "picture")
+            self._plot = _Helper(_warm_plot, (), "plot")
         except (ValueError, OSError):
-            self._process = None
+            self.close()
+            self._picture = self._plot = None
 
     def submit_render(self, poses, q_arm: np.ndarray, fingers: float, path: Path) -> None:
         """Start writing the picture of the given state to ``path``."""
-        if self._process is None:
+        if self._picture is None:
             render_png(self._blocks, poses, q_arm, fingers, path)
             return
-        self._conn.send(("render", (_pack(poses), np.asarray(q_arm), float(fingers), Path(path))))
-        self._pending += 1
+        self._picture.submit((_pack(poses), np.asarray(q_arm), float(fingers), Path(path)))
 
     def submit_plot(self, **job) -> None:
         """Start :func:`cake_drake.outputs.plots.joint_plot` with these arguments."""
-        if self._process is None:
+        if self._plot is None:
             plot_png(job)
             return
-        self._conn.send(("plot", job))
-        self._pending += 1
+        self._plot.submit(job)
 
     def wait(self, timeout_s: float = 120.0) -> None:
         """Wait for every submitted job; raises RuntimeError naming the first that failed,
-        or saying that the helper died or did not answer within ``timeout_s``."""
+        or saying that a helper died or did not answer within ``timeout_s``."""
         import time
 
-        errors = []
         deadline = time.monotonic() + timeout_s
-        while self._pending:
-            if not self._conn.poll(0.2):
-                if not self._process.is_alive():
-                    raise RuntimeError(
-                        f"the output helper stopped (exit code {self._process.exitcode}) "
-                        "before writing the picture and the plot"
-                    )
-                if time.monotonic() > deadline:
-                    raise RuntimeError(f"the output helper did not answer in {timeout_s:g} s")
-                continue
-            try:
-                status, detail = self._conn.recv()
-            except EOFError:
-                raise RuntimeError("the output helper went away mid-job") from None
-            if status == "error":
-                errors.append(detail)
-                if "failed to start" in detail:
-                    break
-                self._pending -= 1
-            else:
-                self._pending -= 1
+        errors = [h.wait(deadline, timeout_s) for h in (self._picture, self._plot) if h]
+        errors = [e for e in errors if e]
         if errors:
             raise RuntimeError(errors[0])
 
     def close(self) -> None:
-        if self._process is not None and self._process.is_alive():
-            try:
-                self._conn.send(None)
-            except OSError:
-                pass
-            self._process.join(timeout=5)
-            if self._process.is_alive():
-                self._process.terminate()
+        for helper in (self._picture, self._plot):
+            if helper is not None:
+                helper.close()

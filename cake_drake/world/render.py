@@ -94,14 +94,40 @@ class Renderer:
         return np.array(image.data, copy=True)
 
 
+def png_bytes(rgba: np.ndarray) -> bytes:
+    """An RGBA array (height x width x 4, uint8) as a PNG file (the standard library's
+    zlib; every row with the "Sub" filter, which suits large flat colours)."""
+    import struct
+    import zlib
+
+    rgba = np.ascontiguousarray(rgba, dtype=np.uint8)
+    height, width, channels = rgba.shape
+    if channels != 4:
+        raise ValueError(f"expected an RGBA image, got {channels} channels")
+    sub = rgba.reshape(height, width * 4).copy()
+    sub[:, 4:] -= rgba.reshape(height, width * 4)[:, :-4]  # wraps modulo 256, as PNG's Sub
+    rows = np.hstack([np.ones((height, 1), np.uint8), sub])  # filter type 1 (Sub)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (
+            struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+        )
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0)  # 8-bit RGBA
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
+        + chunk(b"IEND", b"")
+    )
+
+
 def save_png(rgba: np.ndarray, path: str | Path) -> None:
     """Write an RGBA array as PNG (written whole: to a temporary name, then renamed)."""
-    import matplotlib.image
-
     path = Path(path)
     tmp = path.with_name(path.name + ".part")
     try:
-        matplotlib.image.imsave(tmp, rgba, format="png")
+        tmp.write_bytes(png_bytes(rgba))
         tmp.replace(path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
