@@ -102,9 +102,12 @@ class WaypointIk(LeafSystem):
     appends the moves (:func:`cake_drake.geometric.solve.solve_action`). The outputs
     are the arm's desired state [q_d, v_d] and acceleration a_d, the fingers' desired
     state [q1, q2, v1, v2], the number of actions done, and [phase index, action index]
-    (see :data:`REFERENCE_PORTS`); an action counts as done when its trajectory has run
-    out. An IK failure stops execution and is kept in the state (``Progress.error``);
-    collisions found along the planned moves (with a ``checker``) are kept as warnings.
+    (see :data:`REFERENCE_PORTS`); an action counts as done once its last move may be
+    blended into by the next action's first. The outputs are state, written by the one
+    update every ``period``: the reference at the time of that update, as a discrete
+    plant stepping at the same period reads it. An IK failure stops execution and is
+    kept in the state (``Progress.error``); collisions found along the planned moves
+    (with a ``checker``) are kept as warnings.
     """
 
     def __init__(
@@ -120,7 +123,6 @@ class WaypointIk(LeafSystem):
         self._ik = ik
         self._indices = world
         self._motion = motion
-        self._last_key, self._last_value = None, None
         self._action_port = self.DeclareAbstractInputPort(
             "action", AbstractValue.Make(ActionCommand(0, None))
         )
@@ -129,22 +131,27 @@ class WaypointIk(LeafSystem):
         )
         initial = Progress(JointTrajectory(np.asarray(q_start, float), limits))
         self._state_index = self.DeclareAbstractState(AbstractValue.Make(initial))
-        state = {self.abstract_state_ticket(self._state_index)}
-        timed = state | {self.time_ticket()}
-        self.DeclareVectorOutputPort(
-            "desired_state", 14, self._calc_desired_state, prerequisites_of_calc=timed
-        )
-        self.DeclareVectorOutputPort(
-            "desired_acceleration", 7, self._calc_acceleration, prerequisites_of_calc=timed
-        )
-        self.DeclareVectorOutputPort(
-            "finger_state", 4, self._calc_finger_state, prerequisites_of_calc=timed
-        )
-        self.DeclareVectorOutputPort(
-            "actions_done", 1, self._calc_actions_done, prerequisites_of_calc=state
-        )
-        self.DeclareVectorOutputPort("labels", 2, self._calc_labels, prerequisites_of_calc=timed)
+        # The reference at the time of the last update, one discrete state group per
+        # port: the ports are the state itself, read without calling back into Python,
+        # and one update a step evaluates the trajectory for all of them.
+        self._groups = {}
+        for name, value in self._reference(initial, 0.0).items():
+            self._groups[name] = self.DeclareDiscreteState(value)
+            self.DeclareStateOutputPort(name, self._groups[name])
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
+
+    @staticmethod
+    def _reference(prog: Progress, t: float) -> dict[str, np.ndarray]:
+        """Every port's value at time ``t`` (see :data:`REFERENCE_PORTS`)."""
+        q, v, a = prog.trajectory.evaluate(t)
+        g, rate, phase, action = prog.trajectory.labels(t)
+        return {
+            "desired_state": np.concatenate([q, v]),
+            "desired_acceleration": a,
+            "finger_state": np.array([g, g, rate, rate]),
+            "actions_done": np.array([float(prog.done)]),
+            "labels": np.array([float(phase), float(action)]),
+        }
 
     @property
     def checker(self) -> CollisionChecker | None:
@@ -161,32 +168,35 @@ class WaypointIk(LeafSystem):
         return WorldView(cubes, poses[w.hand_body] @ w.X_hand_grasp, held, w.slots)
 
     def _update(self, context, state) -> None:
-        prog: Progress = context.get_abstract_state(self._state_index).get_value()
-        if prog.error is not None:
-            return
         t = context.get_time()
+        prog: Progress = context.get_abstract_state(self._state_index).get_value()
+        new = self._step(context, prog, t)
+        if new is not prog:
+            state.get_mutable_abstract_state(self._state_index).set_value(new)
+        for name, value in self._reference(new, t).items():
+            state.get_mutable_discrete_state(self._groups[name]).SetFromVector(value)
+
+    def _step(self, context, prog: Progress, t: float) -> Progress:
+        """The progress after this step's decisions (``prog`` itself when unchanged)."""
+        if prog.error is not None:
+            return prog
         if prog.working >= 0:
             # Done (or ready for the next step) once the last move may be blended into.
             if t >= prog.trajectory.ready_time(self._motion.timing.blend) - 1e-9:
                 if prog.pending is not None:
-                    new = self._refine(context, prog, t)
-                else:
-                    new = replace(prog, working=-1, done=prog.done + 1)
-                state.get_mutable_abstract_state(self._state_index).set_value(new)
-            return
+                    return self._refine(context, prog, t)
+                return replace(prog, working=-1, done=prog.done + 1)
+            return prog
         cmd: ActionCommand = self._action_port.Eval(context)
         if cmd.action is None or cmd.index != prog.done:
-            return
+            return prog
         traj = prog.trajectory.copy()
         traj.resume_at(t, "idle", -1)
         m = self._motion
         try:
             action = m.meaning(cmd.action)
         except CakeDrakeError as e:
-            error = f"action {cmd.index + 1} {cmd.action}: {e}"
-            new = replace(prog, error=error)
-            state.get_mutable_abstract_state(self._state_index).set_value(new)
-            return
+            return replace(prog, error=f"action {cmd.index + 1} {cmd.action}: {e}")
         held = action.args[0] if action.name in PICK_ACTIONS else None
 
         def named(text: str) -> str:  # messages name the domain's own action
@@ -209,7 +219,7 @@ class WaypointIk(LeafSystem):
             pending = (
                 (action, str(cmd.action), motion.params, None) if motion.pending_after else None
             )
-            new = replace(
+            return replace(
                 prog,
                 trajectory=traj,
                 working=cmd.index,
@@ -218,8 +228,7 @@ class WaypointIk(LeafSystem):
                 warnings=prog.warnings + found,
             )
         except ExecutionError as e:
-            new = replace(prog, working=-1, error=named(str(e)))
-        state.get_mutable_abstract_state(self._state_index).set_value(new)
+            return replace(prog, working=-1, error=named(str(e)))
 
     def _refine(self, context, prog: Progress, t: float) -> Progress:
         """Above the target: plan the move down to the place pose from the cube's pose in
@@ -246,34 +255,3 @@ class WaypointIk(LeafSystem):
             error = str(e).replace(str(action), own_name)
             return replace(prog, working=-1, pending=None, error=error)
         return replace(prog, trajectory=traj, pending=pending)
-
-    def _trajectory(self, context) -> JointTrajectory:
-        return context.get_abstract_state(self._state_index).get_value().trajectory
-
-    def _evaluate(self, context):
-        """q, v, a now. Two ports read them at every step: the last answer is kept, keyed
-        by the time and the trajectory (state is immutable, so equal keys, equal values)."""
-        traj, t = self._trajectory(context), context.get_time()
-        key = (t, id(traj), len(traj.segments))
-        if self._last_key != key:
-            self._last_key, self._last_value = key, traj.evaluate(t)
-        return self._last_value
-
-    def _calc_desired_state(self, context, output) -> None:
-        q, v, _ = self._evaluate(context)
-        out = output.get_mutable_value()
-        out[:7], out[7:] = q, v
-
-    def _calc_acceleration(self, context, output) -> None:
-        output.SetFromVector(self._evaluate(context)[2])
-
-    def _calc_finger_state(self, context, output) -> None:
-        g, rate, _, _ = self._trajectory(context).labels(context.get_time())
-        output.SetFromVector([g, g, rate, rate])
-
-    def _calc_actions_done(self, context, output) -> None:
-        output.SetAtIndex(0, self.progress(context).done)
-
-    def _calc_labels(self, context, output) -> None:
-        _, _, phase, action = self._trajectory(context).labels(context.get_time())
-        output.SetFromVector([phase, action])
