@@ -1,10 +1,16 @@
-"""Whole-process wall time of `python -m cake_drake.run`, per mode, with a stage breakdown.
+"""Whole-process wall time of `python -m cake_drake.run`, per mode, with a stage breakdown,
+then the same runs side by side with the two peers.
 
-    python benchmarks/run.py [--repeats N] [--problem P]
+    python benchmarks/run.py [--repeats N] [--problem P] [--rounds R] [--peers DIR]
 
 Each run is a fresh process (interpreter start and imports included) writing every
 output (plan, trajectory, final-state picture, joint-4 plot, summary). Medians over
-the repeats; the stage times come from each run's summary.json.
+the repeats; the stage times come from each run's summary.json; CPU is user + system
+time of the run and its helpers, peak memory the largest single process of the run.
+
+With the peers' folder present (default ../shared/peers beside the project), its
+compare.py then times cake_drake against the PyBullet version and the tuned Drake
+script in one paired run (A B C, A B C, ...) and prints the ratios.
 """
 
 from __future__ import annotations
@@ -15,10 +21,24 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from machine import machine  # benchmarks/machine.py
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: Runs one command and prints its wall time, the CPU time of it and its helpers (every
+#: descendant is waited for) and the largest of those processes' peak memory.
+MEASURE = """
+import json, resource, subprocess, sys, time
+t0 = time.perf_counter()
+code = subprocess.run(json.loads(sys.argv[1]), stdout=subprocess.DEVNULL).returncode
+wall = time.perf_counter() - t0
+u = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(json.dumps({"process_s": wall, "cpu_s": u.ru_utime + u.ru_stime,
+                  "peak_mib": u.ru_maxrss / 1024}))
+sys.exit(code)
+"""
 
 STAGES = ["import", "planning", "diagram_build", "simulation", "ik", "outputs"]
 
@@ -28,13 +48,14 @@ def one_run(mode: str, problem: str | None, extra: list[str]) -> dict:
         cmd = [sys.executable, "-m", "cake_drake.run", "--mode", mode, "--out", out, "--quiet"]
         if problem:
             cmd += ["--problem", problem]
-        t0 = time.perf_counter()
-        r = subprocess.run(cmd + extra, capture_output=True, text=True)
-        wall = time.perf_counter() - t0
+        r = subprocess.run(
+            [sys.executable, "-c", MEASURE, json.dumps(cmd + extra)], capture_output=True, text=True
+        )
         if r.returncode != 0:
             sys.exit(f"run failed ({r.returncode}): {r.stderr.strip()}")
+        figures = json.loads(r.stdout.strip().splitlines()[-1])
         summary = json.loads((Path(out) / "summary.json").read_text())
-    summary["process_s"] = wall
+    summary.update(figures)
     return summary
 
 
@@ -42,10 +63,18 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--problem", default=None)
+    p.add_argument("--rounds", type=int, default=5, help="rounds of the paired comparison")
+    p.add_argument(
+        "--peers",
+        type=Path,
+        default=ROOT.parent / "shared" / "peers",
+        help="folder with compare.py (default: ../shared/peers); missing: no comparison",
+    )
     args = p.parse_args()
     print(f"machine: {machine()}")
     print(f"median of {args.repeats} runs per row; every run builds the tower (exit 0)\n")
-    head = ["mode", "process s", "sim s", "RTF", *[f"{s} s" for s in STAGES], "max err mrad"]
+    head = ["mode", "process s", "CPU s", "peak MiB", "sim s", "RTF"]
+    head += [*[f"{s} s" for s in STAGES], "max err mrad"]
     print(" | ".join(head))
     print(" | ".join("---" for _ in head))
     replay = None
@@ -76,12 +105,23 @@ def main() -> None:
         cells = [
             mode,
             f"{med(lambda r: r['process_s']):.2f}",
+            f"{med(lambda r: r['cpu_s']):.2f}",
+            f"{med(lambda r: r['peak_mib']):.0f}",
             f"{med(lambda r: r['sim_s']):.1f}",
             f"{med(lambda r: r['rtf']):.1f}",
             *[f"{med(lambda r, s=s: r['stages_s'].get(s, 0.0)):.3f}" for s in STAGES],
             f"{med(lambda r: max(r['tracking_error']['max_rad'])) * 1000:.1f}",
         ]
         print(" | ".join(cells))
+    compare = args.peers / "compare.py"
+    if not compare.exists():
+        print(f"\n{compare} not found: no comparison with the peers")
+        return
+    print(f"\nside by side with the peers ({compare}, {args.rounds} rounds):", flush=True)
+    subprocess.run(
+        [sys.executable, str(compare), "--rounds", str(args.rounds), "--project", str(ROOT)],
+        check=True,
+    )
 
 
 if __name__ == "__main__":
