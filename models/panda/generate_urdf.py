@@ -1,6 +1,7 @@
 """Write the Panda URDFs in this folder from the published kinematics and the mesh geometry.
 
-Run once by hand (``python models/panda/generate_urdf.py``); the URDFs it writes are committed.
+Run once by hand (``pip install -e .[models]``, then ``python models/panda/generate_urdf.py``);
+the URDFs and meshes it writes are committed.
 
 Why generate: the only offline Panda description on PyPI (``pybullet_data/franka_panda``)
 has placeholder inertias (0.1 kg m^2 on every link), zero-mass links, no actuators and a
@@ -18,8 +19,9 @@ meshes, and write:
 
 Collision meshes are referenced as ``package://pybullet_franka_panda/meshes/...``; the
 world layer maps that package to the ``pybullet_data`` wheel's folder at run time (no
-download). Visual meshes are compact copies kept in ``meshes/`` here (see
-:func:`write_visual_meshes`): the wheel's own do not load in a browser's Meshcat.
+download). Visual meshes are simplified copies kept in ``meshes/`` here (see
+:func:`write_visual_meshes`): the wheel's own do not load in a browser's Meshcat, and
+their ~100,000 triangles make every picture slow.
 """
 
 from __future__ import annotations
@@ -114,7 +116,7 @@ def copy_plain_meshes() -> None:
         (OWN_MESHES / f"{name}.obj").write_text("".join(kept))
 
 
-def write_visual_meshes(decimals: int = 4) -> None:
+def write_visual_meshes(decimals: int = 4, keep: float = 0.12, crease_deg: float = 35.0) -> None:
     """Rewrite the wheel's detailed visual meshes so that every viewer draws them, compactly.
 
     Meshcat's browser viewer merges the parts of an OBJ into one geometry and draws nothing
@@ -124,8 +126,15 @@ def write_visual_meshes(decimals: int = 4) -> None:
     has triangles with normals only (Drake's VTK renderer needs normals), positions to
     ``decimals`` places (0.1 mm by default), normals to 3, one part per colour, and
     no texture: the texture (``colors.png``) is a white sheet with one grey decal, so each
-    face's texel is baked into its part's diffuse colour. About half the original size.
+    face's texel is baked into its part's diffuse colour.
+
+    Each part of over 1,000 triangles is simplified to ``keep`` of them (quadric edge collapse, the
+    ``fast-simplification`` package: ``pip install -e .[models]``): the wheel's ~100,000
+    triangles are far more than an 800 x 600 picture or a browser view shows, and loading
+    them is most of what a picture costs. Normals are recomputed per corner, smooth across
+    edges sharper than ``crease_deg`` and creased beyond.
     """
+    import fast_simplification
     import matplotlib.image
 
     OWN_MESHES.mkdir(exist_ok=True)
@@ -140,19 +149,14 @@ def write_visual_meshes(decimals: int = 4) -> None:
 
     for name in DETAILED:
         materials = _read_mtl(MESHES / "visual" / f"{name}.mtl")
-        positions: list[str] = []
+        points: list[list[float]] = []
         uvs: list[tuple[float, float]] = []
-        normal_ids: dict[str, int] = {}  # rounded normal -> its new 1-based index
-        renumber: list[int] = []  # old normal index - 1 -> new index
-        faces: dict[tuple[float, ...], list[str]] = {}
+        parts: dict[tuple[float, ...], list[list[int]]] = {}  # colour -> triangles
         material = ((1.0, 1.0, 1.0), False)
         for line in (MESHES / "visual" / f"{name}.obj").read_text().splitlines():
             tag, _, rest = line.partition(" ")
             if tag == "v":
-                positions.append("v " + " ".join(number(float(x), decimals) for x in rest.split()))
-            elif tag == "vn":
-                key = " ".join(number(float(x), 3) for x in rest.split())
-                renumber.append(normal_ids.setdefault(key, len(normal_ids) + 1))
+                points.append([float(x) for x in rest.split()[:3]])
             elif tag == "vt":
                 u, v = (float(x) for x in rest.split()[:2])
                 uvs.append((u, v))
@@ -169,13 +173,31 @@ def write_visual_meshes(decimals: int = 4) -> None:
                     if decal[row, col]:
                         rgb = tuple(k * t for k, t in zip(kd, decal_rgb, strict=True))
                 key = tuple(round(float(x), 3) for x in rgb)
-                face = " ".join(f"{c[0]}//{renumber[int(c[2]) - 1]}" for c in corners)
-                faces.setdefault(key, []).append("f " + face)
-            # "l" (stray line elements), "o", "g", "s" and comments: dropped.
+                parts.setdefault(key, []).append([int(c[0]) - 1 for c in corners])
+            # normals (recomputed), "l" (stray line elements), "o", "g", "s": dropped.
+        vertices = np.array(points)
+        positions: list[str] = []
+        normal_ids: dict[str, int] = {}  # rounded normal -> its 1-based index
+        faces: dict[tuple[float, ...], list[str]] = {}
+        for key, triangles in parts.items():
+            used, local = np.unique(np.array(triangles), return_inverse=True)
+            p, t = vertices[used], local.reshape(-1, 3)
+            if len(t) > 1000:  # small parts (the fingers, the decals) are kept whole
+                p, t = fast_simplification.simplify(p, t, target_count=int(len(t) * keep))
+            offset = len(positions)
+            positions += ["v " + " ".join(number(x, decimals) for x in xyz) for xyz in p]
+            normals = _corner_normals(p, t, crease_deg)
+            for tri, corner_normals in zip(t, normals, strict=True):
+                ids = []
+                for n in corner_normals:
+                    text = " ".join(number(x, 3) for x in n)
+                    ids.append(normal_ids.setdefault(text, len(normal_ids) + 1))
+                corners = (f"{offset + int(i) + 1}//{k}" for i, k in zip(tri, ids, strict=True))
+                faces.setdefault(key, []).append("f " + " ".join(corners))
         source = f"pybullet_data/franka_panda/meshes/visual/{name}"
         mtl = [f"# {name}: the colours of {source}.mtl, texture baked in"]
         obj = [
-            f"# {name}: {source}.obj rewritten by models/panda/generate_urdf.py",
+            f"# {name}: {source}.obj simplified by models/panda/generate_urdf.py",
             f"mtllib {name}.mtl",
             *positions,
             *(f"vn {n}" for n in normal_ids),
@@ -185,6 +207,28 @@ def write_visual_meshes(decimals: int = 4) -> None:
             obj += [f"o {name}_{k}", f"usemtl {name}_{k}", *lines]
         (OWN_MESHES / f"{name}.mtl").write_text("\n".join(mtl) + "\n")
         (OWN_MESHES / f"{name}.obj").write_text("\n".join(obj) + "\n")
+
+
+def _corner_normals(points: np.ndarray, triangles: np.ndarray, crease_deg: float) -> np.ndarray:
+    """(n, 3, 3) unit normals at each triangle's corners: the area-weighted mean of the
+    normals of the triangles around that corner's vertex that meet this one at less than
+    ``crease_deg``, so smooth surfaces shade smoothly and sharp edges stay sharp."""
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    weighted = np.cross(b - a, c - a)  # length: twice the area
+    unit = weighted / np.maximum(np.linalg.norm(weighted, axis=1, keepdims=True), 1e-12)
+    around: dict[int, list[int]] = {}
+    for f, tri in enumerate(triangles):
+        for v in tri:
+            around.setdefault(int(v), []).append(f)
+    cos_crease = np.cos(np.radians(crease_deg))
+    out = np.empty((len(triangles), 3, 3))
+    for f, tri in enumerate(triangles):
+        for k, v in enumerate(tri):
+            near = np.array(around[int(v)])
+            near = near[unit[near] @ unit[f] >= cos_crease]
+            n = weighted[near].sum(axis=0)
+            out[f, k] = n / max(np.linalg.norm(n), 1e-12)
+    return out
 
 
 def _read_mtl(path: Path) -> dict[str, tuple[tuple[float, ...], bool]]:
