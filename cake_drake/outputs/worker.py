@@ -1,14 +1,14 @@
 """Helper processes for the slow outputs, so they overlap the simulation.
 
-Loading the Panda's visual meshes into VTK and importing matplotlib together take
-about as long as simulating the whole task. Two helpers are forked at the start of a
-run, one for the picture and one for the plot: while the main process plans and
-simulates, the first builds its :class:`Renderer` and renders once (the meshes load
-then), the second imports the plotting code. At the end they get the final state and
-the logs and write ``final_state.png`` and the joint plot side by side, while the main
-process writes the rest. Apart, each stays small (VTK and matplotlib never share a
-process). Where forking is not available, or a helper fails, the same functions run
-in-process.
+Building a VTK world and importing matplotlib together take about half as long as
+simulating the whole task. Two helpers are forked at the start of a run, one for the
+picture and one for the plot: while the main process plans and simulates, the first
+builds its :class:`Renderer` and renders once (the meshes load then), then the second
+imports the plotting code (one at a time, so that on two cores the simulation always
+has one to itself). At the end they get the final state and the logs and write
+``final_state.png`` and the joint plot side by side, while the main process writes the
+rest. Apart, each stays small (VTK and matplotlib never share a process). Where forking
+is not available, or a helper fails, the same functions run in-process.
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def _warm_plot():
     return plot_png
 
 
-def _serve(conn, parent_end, warm, args, what: str) -> None:
+def _serve(conn, parent_end, warm, args, what: str, after, warmed) -> None:
     import signal
 
     # The fork copied the parent's end of the pipe too: close it, so that the parent's
@@ -73,11 +73,16 @@ def _serve(conn, parent_end, warm, args, what: str) -> None:
     # Ctrl-C reaches the whole process group: the parent decides, the helper stays quiet.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if after is not None:
+        after.wait(WARM_WAIT_S)
     try:
         handle = warm(*args)
     except Exception as e:  # noqa: BLE001 - reported to the parent as one line
         conn.send(("error", f"output worker failed to start: {e}"))
         return
+    finally:
+        if warmed is not None:
+            warmed.set()
     while True:
         try:
             job = conn.recv()
@@ -92,16 +97,21 @@ def _serve(conn, parent_end, warm, args, what: str) -> None:
             conn.send(("error", f"writing the {what} output failed: {e}"))
 
 
+#: How long (s) the plot's helper waits for the picture's to warm up before it starts anyway.
+WARM_WAIT_S = 10.0
+
+
 class _Helper:
     """One forked helper process and its pipe."""
 
-    def __init__(self, warm, args, what: str) -> None:
+    def __init__(self, warm, args, what: str, after=None, warmed=None) -> None:
+        """``after``: an event to wait for before warming up; ``warmed``: one to set after."""
         self.what = what
         self.pending = 0
         ctx = mp.get_context("fork")
         self.conn, child = ctx.Pipe()
         self.process = ctx.Process(
-            target=_serve, args=(child, self.conn, warm, args, what), daemon=True
+            target=_serve, args=(child, self.conn, warm, args, what, after, warmed), daemon=True
         )
         self.process.start()
         child.close()  # the helper's end lives in the helper alone
@@ -165,10 +175,12 @@ class OutputWorker:
         self._blocks = list(blocks)
         self._picture = self._plot = None
         try:
+            # One helper warms up at a time, so the simulation keeps a core to itself.
+            warmed = mp.get_context("fork").Event() if render else None
             if render:
                 args = (self._blocks, _pack(initial_poses))
-                self._picture = _Helper(_warm_picture, args, "picture")
-            self._plot = _Helper(_warm_plot, (), "plot")
+                self._picture = _Helper(_warm_picture, args, "picture", warmed=warmed)
+            self._plot = _Helper(_warm_plot, (), "plot", after=warmed)
         except (ValueError, OSError):
             self.close()
             self._picture = self._plot = None
