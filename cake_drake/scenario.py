@@ -23,6 +23,8 @@ absolute path, or a path relative to the scenario file's folder.
 
 import dataclasses
 import math
+import os
+import sys
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -381,16 +383,32 @@ def scenario_names(path: str | Path) -> list[str]:
 
 
 def package_versions() -> dict[str, str]:
-    """Versions of the packages a run's result depends on."""
-    from importlib.metadata import PackageNotFoundError, version
+    """Versions of the packages a run's result depends on.
 
-    out = {"cake_drake": __version__}
-    for name in ("drake", "numpy", "pyperplan", "matplotlib"):
+    Read from the names of their ``*.dist-info`` folders, as pip installs them: importing
+    ``importlib.metadata`` alone costs a run more than writing all its other files.
+    """
+    names = ("drake", "numpy", "pyperplan", "matplotlib")
+    found: dict[str, str] = {}
+    for entry in sys.path:
         try:
-            out[name] = version(name)
-        except PackageNotFoundError:
-            out[name] = "not installed"
-    return out
+            folders = os.listdir(entry or ".")
+        except OSError:
+            continue
+        for folder in folders:
+            name, _, rest = folder.partition("-")
+            if rest.endswith(".dist-info") and name.lower() in names and name.lower() not in found:
+                found[name.lower()] = rest[: -len(".dist-info")]
+    missing = [n for n in names if n not in found]
+    if missing:  # installed some other way: ask the slow, general lookup
+        from importlib.metadata import PackageNotFoundError, version
+
+        for name in missing:
+            try:
+                found[name] = version(name)
+            except PackageNotFoundError:
+                found[name] = "not installed"
+    return {"cake_drake": __version__, **{n: found[n] for n in names}}
 
 
 def dump_scenario(scenario: Scenario) -> str:

@@ -55,6 +55,16 @@ def test_every_field_is_written_with_the_package_versions():
     assert "drake 1." in text and "cake_drake" in text
 
 
+def test_package_versions_agree_with_the_installed_metadata():
+    from importlib.metadata import version
+
+    from cake_drake.scenario import package_versions
+
+    found = package_versions()
+    for name in ("drake", "numpy", "pyperplan", "matplotlib"):
+        assert found[name] == version(name), name
+
+
 @pytest.mark.parametrize(
     "text, words",
     [
