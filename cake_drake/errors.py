@@ -120,3 +120,18 @@ def _interrupted(name: str) -> int:
     how = " by SIGTERM" if name == "SIGTERM" else ""
     print(f"error: interrupted{how}; nothing was written", file=sys.stderr)
     return EXIT_INTERRUPTED
+
+
+def exit_now(code: int) -> None:
+    """End a command whose work is done and whose files are all written, skipping the
+    interpreter's teardown: freeing a simulated world object by object, and every module
+    of pydrake, costs a run ~0.2 s and changes nothing. Standard output and error are
+    flushed first. For commands that start no threads or processes of their own that
+    outlive them (helpers are joined before this; a sweep's are not, so it exits normally).
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe, a closed stream: nothing to keep
+            pass
+    os._exit(code)

@@ -4,10 +4,8 @@ The argument parsing lives in :mod:`cake_drake.cli`; the library call is
 :func:`cake_drake.pipeline.run`.
 """
 
-import sys
-
 from cake_drake.cli import main_run
-from cake_drake.errors import run_cli
+from cake_drake.errors import exit_now, run_cli
 
 if __name__ == "__main__":
-    sys.exit(run_cli(main_run))
+    exit_now(run_cli(main_run))

@@ -3,10 +3,8 @@
 The argument parsing lives in :mod:`cake_drake.cli`; the work in :mod:`.show`.
 """
 
-import sys
-
 from cake_drake.cli import main_world
-from cake_drake.errors import run_cli
+from cake_drake.errors import exit_now, run_cli
 
 if __name__ == "__main__":
-    sys.exit(run_cli(main_world))
+    exit_now(run_cli(main_world))
