@@ -1,9 +1,7 @@
 """The stage: a table, a Franka Panda at its edge and one 4 cm cube per block.
 
-Everything is loaded from ``models/`` through Drake's ``PackageMap``: the package
-``cake_drake`` is the repository's ``models/`` folder, and ``pybullet_franka_panda`` is the
-Panda mesh folder that ships inside the ``pybullet`` wheel (installed from PyPI, never
-downloaded at run time; the simulator itself is never imported).
+Everything is loaded from ``models/`` through Drake's ``PackageMap`` (the package
+``cake_drake`` is the repository's ``models/`` folder); nothing is downloaded at run time.
 """
 
 import colorsys
@@ -11,7 +9,6 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import (
@@ -66,7 +63,7 @@ SCENE_DIRECTIVES = "package://cake_drake/scene/panda_on_table.dmd.yaml"
 CONTROL_DIRECTIVES = "package://cake_drake/scene/panda_control.dmd.yaml"
 
 
-#: The table top (models/scene/table.sdf): x from -0.25 to 0.95 m, y within +-0.6 m.
+#: The table top (models/scene/table.urdf): x from -0.25 to 0.95 m, y within +-0.6 m.
 TABLE_X = (-0.25, 0.95)
 TABLE_HALF_WIDTH = 0.6
 TABLE_MARGIN = 0.05  # m: a slot's centre stays this far inside the table's edges
@@ -188,12 +185,9 @@ class Scene:
 
 
 def package_map() -> PackageMap:
-    """Packages the models refer to: ``cake_drake`` and the Panda meshes (offline)."""
-    import pybullet_data  # data only: the folder that holds franka_panda/meshes
-
+    """The one package the models refer to: ``cake_drake``, the ``models/`` folder."""
     packages = PackageMap.MakeEmpty()
     packages.Add("cake_drake", str(MODELS_DIR))
-    packages.Add("pybullet_franka_panda", str(Path(pybullet_data.getDataPath()) / "franka_panda"))
     return packages
 
 

@@ -17,11 +17,10 @@ meshes, and write:
 * ``panda_hand_welded.urdf``: the same hand with the fingers fixed, for the 7-DOF
   control plant that ``InverseDynamicsController`` needs (it rejects unactuated DOFs).
 
-Collision meshes are referenced as ``package://pybullet_franka_panda/meshes/...``; the
-world layer maps that package to the ``pybullet_data`` wheel's folder at run time (no
-download). Visual meshes are simplified copies kept in ``meshes/`` here (see
-:func:`write_visual_meshes`): the wheel's own do not load in a browser's Meshcat, and
-their ~100,000 triangles make every picture slow.
+Every mesh a run loads is kept here, so a run needs nothing from the wheel: the collision
+meshes' convex hulls in ``collision/`` (:func:`write_collision_hulls`), and simplified
+visual meshes in ``meshes/`` (:func:`write_visual_meshes`): the wheel's own do not load
+in a browser's Meshcat, and their ~100,000 triangles make every picture slow.
 """
 
 from __future__ import annotations
@@ -30,12 +29,14 @@ from pathlib import Path
 
 import numpy as np
 import pybullet_data
-from pydrake.geometry import Mesh
+from pydrake.geometry import Convex, Mesh
 from pydrake.multibody.tree import CalcSpatialInertia
 
 HERE = Path(__file__).resolve().parent
 MESHES = Path(pybullet_data.getDataPath()) / "franka_panda" / "meshes"
-PKG = "package://pybullet_franka_panda/meshes"
+#: The collision meshes' convex hulls, kept here (see :func:`write_collision_hulls`).
+HULLS = HERE / "collision"
+HULLS_PKG = "package://cake_drake/panda/collision"
 
 # Link masses (kg) as published with the pybullet_data model.
 MASS = {
@@ -57,11 +58,13 @@ JOINTS = [
     ((0.088, 0, 0),      (np.pi / 2, 0, 0), -2.8973, 2.8973, 2.61, 12.0, 20.0),
 ]  # fmt: skip
 
-# Visual meshes, all kept in meshes/ here (Apache-2.0, as the wheel's LICENSE.txt). Links 0
+# Visual meshes, all kept in meshes/ here (Apache-2.0, as the wheel: LICENSE.txt here). Links 0
 # and 7 have no detailed mesh in the wheel: their collision meshes serve, copied without the
 # material file they name and the wheel lacks (a warning on every load). The others are
 # the wheel's detailed meshes rewritten by write_visual_meshes().
 OWN_MESHES = HERE / "meshes"
+#: The links whose collision mesh touches the world (the fingers touch it through pads).
+HULL_LINKS = ("link0", "link1", "link2", "link3", "link4", "link5", "link6", "link7", "hand")
 PLAIN = ("link0", "link7")
 DETAILED = ("link1", "link2", "link3", "link4", "link5", "link6", "hand", "finger")
 VISUAL = {name: f"package://cake_drake/panda/meshes/{name}.obj" for name in PLAIN + DETAILED}
@@ -105,6 +108,28 @@ def visual(name: str, rpy: str = "0 0 0") -> str:
         f'      <geometry><mesh filename="{mesh}"/></geometry>\n{colour}'
         f"    </visual>\n"
     )
+
+
+def write_collision_hulls() -> None:
+    """The convex hull of each collision mesh of the wheel, as Drake computes it: what a
+    ``drake:declare_convex`` mesh collides as anyway. Drake then parses a few hundred
+    vertices per link instead of thousands (about 40 ms less for each world built), and
+    a run needs no file from the wheel. Vertices are written exactly (``repr``), so the
+    hull of the hull is the same solid; the inertias still come from the full meshes."""
+    HULLS.mkdir(exist_ok=True)
+    for name in HULL_LINKS:
+        source = MESHES / "collision" / f"{name}.obj"
+        origin = f"pybullet_data/franka_panda/meshes/collision/{name}.obj"
+        hull = Convex(str(source)).GetConvexHull()
+        lines = [f"# {name}: the convex hull of {origin}"]
+        for i in range(hull.num_vertices()):
+            lines.append("v " + " ".join(repr(float(x)) for x in hull.vertex(i)))
+        data, k = list(hull.face_data()), 0
+        while k < len(data):
+            n = data[k]
+            lines.append("f " + " ".join(str(v + 1) for v in data[k + 1 : k + 1 + n]))
+            k += n + 1
+        (HULLS / f"{name}.obj").write_text("\n".join(lines) + "\n")
 
 
 def copy_plain_meshes() -> None:
@@ -250,7 +275,7 @@ def _read_mtl(path: Path) -> dict[str, tuple[tuple[float, ...], bool]]:
 def convex_collision(name: str) -> str:
     return (
         f"    <collision>\n"
-        f'      <geometry><mesh filename="{PKG}/collision/{name}.obj">'
+        f'      <geometry><mesh filename="{HULLS_PKG}/{name}.obj">'
         f"<drake:declare_convex/></mesh></geometry>\n"
         f"    </collision>\n"
     )
@@ -336,6 +361,7 @@ def hand(fingers_move: bool) -> str:
 
 def main() -> None:
     copy_plain_meshes()
+    write_collision_hulls()
     write_visual_meshes()
     (HERE / "panda_arm.urdf").write_text(arm())
     (HERE / "panda_hand.urdf").write_text(hand(fingers_move=True))
