@@ -99,6 +99,11 @@ class Segment:
     action: int
     gripper: float  # finger command at the end of the segment (m per finger)
     gripper0: float  # ... at its start: a hold that changes it ramps linearly
+    #: Whether the arm moves (False: a hold). Asked every step, so computed once.
+    moves: bool = field(init=False, compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "moves", bool(np.any(self.q1 != self.q0)))
 
     def __deepcopy__(self, memo):  # immutable: share, do not copy
         return self
@@ -106,10 +111,6 @@ class Segment:
     @property
     def end(self) -> float:
         return self.t0 + self.duration
-
-    @property
-    def moves(self) -> bool:
-        return bool(np.any(self.q1 != self.q0))
 
     def at(self, t):
         """Displacement from ``q0``, velocity and acceleration at ``t`` (scalar or array)."""
@@ -250,35 +251,36 @@ class JointTrajectory:
         g = self.end_gripper if gripper is None else gripper
         self._append(duration, self.end_q, phase, action, g)
 
-    def _segment(self, t: float) -> Segment | None:
-        if not self.segments or t < self.start_time:
-            return None
-        i = bisect.bisect_right(self._starts, t) - 1
-        return self.segments[max(i, 0)]
-
-    def evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """q, q-dot, q-double-dot at time ``t`` (held at the ends)."""
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, int, int]:
+        """Everything at time ``t``: q, q-dot, q-double-dot (held at the ends), then the
+        finger command, its rate, the phase index and the action index (idle: 0, -1)."""
         if not self.segments or t < self.start_time:
             q = np.asarray(self.start_q, float)
-            return q, np.zeros_like(q), np.zeros_like(q)
+            zero = np.zeros_like(q)
+            return q, zero, zero, self.end_gripper, 0.0, 0, -1
         i = max(bisect.bisect_right(self._starts, t) - 1, 0)
         seg = self.segments[i]
         q, v, a = seg.at(t)
         prev = self.segments[i - 1] if i > 0 else None
         if prev is not None and t < prev.end:  # blending: the last move is still running
             q0, v0, a0 = prev.at(t)
-            return prev.q0 + q0 + q, v0 + v, a0 + a
-        return seg.q0 + q, v, a
+            q, v, a = prev.q0 + q0 + q, v0 + v, a0 + a
+        else:
+            q = seg.q0 + q
+        if t > self.end_time:
+            return q, v, a, self.end_gripper, 0.0, 0, -1
+        if seg.gripper == seg.gripper0:
+            return q, v, a, seg.gripper, 0.0, seg.phase, seg.action
+        rate = (seg.gripper - seg.gripper0) / seg.duration
+        return q, v, a, seg.gripper0 + rate * (t - seg.t0), rate, seg.phase, seg.action
+
+    def evaluate(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """q, q-dot, q-double-dot at time ``t`` (held at the ends)."""
+        return self.at(t)[:3]
 
     def labels(self, t: float) -> tuple[float, float, int, int]:
         """(finger command, its rate, phase index, action index) at time ``t``."""
-        seg = self._segment(t)
-        if seg is None or t > self.end_time:
-            return self.end_gripper, 0.0, 0, -1
-        if seg.gripper == seg.gripper0:
-            return seg.gripper, 0.0, seg.phase, seg.action
-        rate = (seg.gripper - seg.gripper0) / seg.duration
-        return seg.gripper0 + rate * (t - seg.t0), rate, seg.phase, seg.action
+        return self.at(t)[3:]
 
     def sample(self, dt: float, t_end: float | None = None) -> dict[str, np.ndarray]:
         """Every field of ``trajectory.npz`` sampled every ``dt`` seconds."""
@@ -286,8 +288,7 @@ class JointTrajectory:
         ts = np.arange(self.start_time, t_end + dt / 2, dt)
         qs, vs, accs, grip, phase, action = [], [], [], [], [], []
         for t in ts:
-            q, v, a = self.evaluate(t)
-            g, _, p, k = self.labels(t)
+            q, v, a, g, _, p, k = self.at(t)
             qs.append(q), vs.append(v), accs.append(a)
             grip.append(g), phase.append(p), action.append(k)
         return {

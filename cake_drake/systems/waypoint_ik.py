@@ -143,8 +143,7 @@ class WaypointIk(LeafSystem):
     @staticmethod
     def _reference(prog: Progress, t: float) -> dict[str, np.ndarray]:
         """Every port's value at time ``t`` (see :data:`REFERENCE_PORTS`)."""
-        q, v, a = prog.trajectory.evaluate(t)
-        g, rate, phase, action = prog.trajectory.labels(t)
+        q, v, a, g, rate, phase, action = prog.trajectory.at(t)
         return {
             "desired_state": np.concatenate([q, v]),
             "desired_acceleration": a,
