@@ -51,18 +51,26 @@ $(STAMP): pyproject.toml | $(VENV)/bin/python
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
-venv: $(STAMP)
+# The package's bytecode, compiled here rather than by each run: an editable install
+# has none, and where PYTHONDONTWRITEBYTECODE is set Python would compile every module
+# anew in every run (~0.1 s of each `python -m cake_drake.run`).
+BYTECODE := $(VENV)/.bytecode
+$(BYTECODE): $(STAMP) $(shell find cake_drake -name '*.py')
+	$(PY) -m compileall -q cake_drake
+	touch $(BYTECODE)
 
-run: system-packages-run $(STAMP)
+venv: $(BYTECODE)
+
+run: system-packages-run $(BYTECODE)
 	$(PY) -m cake_drake.run --mode torque
 
-test: system-packages-test $(STAMP)
+test: system-packages-test $(BYTECODE)
 	$(PY) -m pytest
 
-lint: $(STAMP)
+lint: $(BYTECODE)
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
 
-bench: system-packages-run $(STAMP)
+bench: system-packages-run $(BYTECODE)
 	$(PY) benchmarks/planning.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/run.py
