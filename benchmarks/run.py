@@ -121,10 +121,11 @@ def main() -> None:
         print(f"\n{compare} not found: no comparison with the peers")
         return
     print(f"\nside by side with the peers ({compare}, {args.rounds} rounds):", flush=True)
-    subprocess.run(
-        [sys.executable, str(compare), "--rounds", str(args.rounds), "--project", str(ROOT)],
-        check=True,
-    )
+    code = subprocess.run(
+        [sys.executable, str(compare), "--rounds", str(args.rounds), "--project", str(ROOT)]
+    ).returncode
+    if code:
+        sys.exit(f"{compare} failed (exit {code}); its output is above")
 
 
 if __name__ == "__main__":
