@@ -126,11 +126,3 @@ def joint_plot(
         # Light PNG compression: a third faster to write, a sixth larger.
         fig.savefig(Path(path), dpi=100, pil_kwargs={"compress_level": 1})
     return fig
-
-
-def warm_up() -> None:
-    """Draw a tiny plot once, so fonts and the renderer are loaded before real work."""
-    t = np.linspace(0.0, 1.0, 5)
-    q = np.zeros((5, 7))
-    fig = joint_plot(t, q, q, q, np.zeros(5, int))
-    fig.canvas.draw()

@@ -57,10 +57,13 @@ def _warm_picture(blocks, warm_poses):
 
 
 def _warm_plot():
-    """Import matplotlib and its fonts now, not at the end; returns the job handler."""
-    from cake_drake.outputs.plots import warm_up
+    """Import the plotting code (matplotlib) now, not at the end; returns the job handler.
 
-    warm_up()
+    Only the import: drawing a first figure in advance (to an Agg canvas, or just
+    building one) made the real plot no faster, measured in fresh processes.
+    """
+    import cake_drake.outputs.plots  # noqa: F401
+
     return plot_png
 
 
