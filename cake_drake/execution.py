@@ -7,6 +7,7 @@ cube poses back as PDDL facts. Nothing here assumes success: the verdict is meas
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -103,7 +104,7 @@ class ProgressBar:
         self.describe = describe
         self.enabled = enabled
         self.tty = sys.stderr.isatty()
-        self._last_line = -1.0
+        self._last_line = -math.inf  # the first update prints: the simulation has begun
 
     def update(self, sim_t: float, wall: float, done: int, final: bool = False) -> None:
         if not self.enabled:

@@ -253,18 +253,27 @@ def test_a_recorded_reference_with_bad_labels_is_refused_up_front(tmp_path, chan
 def test_a_signal_mid_run_stops_cleanly_and_keeps_the_old_outputs(tmp_path, sig):
     out = tmp_path / "out"
     before = _old_run(out)
+    # A minute of settling after the last action: however fast the machine, the run is
+    # still simulating when its first progress line arrives and the signal follows.
+    scenario = tmp_path / "long.yaml"
+    scenario.write_text("simulation: {settle_s: 60}\n")
     proc = subprocess.Popen(
-        [sys.executable, "-m", "cake_drake.run", "--quiet", "--time-step", "0.002",
-         "--out", str(out)],
+        [sys.executable, "-m", "cake_drake.run", "--scenario", str(scenario), "--out", str(out)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
         start_new_session=True,
     )  # fmt: skip
-    time.sleep(4.0)  # imports, planning, the Diagram: the simulation is running now
+    seen = []
+    while not any(line.startswith("simulating") for line in seen):  # the run's own signal
+        line = proc.stderr.readline()
+        assert line, f"the run ended before it simulated: {''.join(seen)}"
+        seen.append(line)
     assert proc.poll() is None, "the run ended before the signal"
     os.killpg(proc.pid, sig)  # as a terminal's Ctrl-C does: the whole process group
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
-    assert err.count("\n") == 1 and err.startswith("error: interrupted"), err
+    assert "Traceback" not in err, err
+    assert err.splitlines()[-1].startswith("error: interrupted"), err
+    assert all(line.startswith("simulating") for line in err.splitlines()[:-1]), err
     assert _snapshot(out) == before
     _no_leftovers(out)
 
