@@ -32,7 +32,7 @@ from cake_drake.dynamic.analysis import settling
 from cake_drake.errors import ExecutionError, InputError, run_cli
 from cake_drake.execution import Logs
 from cake_drake.outputs.files import OutputDir
-from cake_drake.pipeline import check, run
+from cake_drake.pipeline import check, run, run_inputs
 from cake_drake.scenario import ComputedTorque, JointPd, Recorded, Scenario, resolve_path
 from cake_drake.sweeps import LocalPool, Sweep, run_sweep
 
@@ -145,6 +145,15 @@ def _replay(out: Path, row: dict, kp: list[float]) -> Replay:
     return Replay(row["controller.kd"], kp[0], bool(row["success"]), row["message"], logs)
 
 
+#: The files a gains study writes.
+GAINS_OUTPUTS = ("kd_comparison.png", "gains.json", "reference.npz")
+
+
+def gains_inputs(base: Scenario) -> list[Path]:
+    """The files the study reads (none may be among the outputs it replaces)."""
+    return run_inputs(base)
+
+
 def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
     """Run :func:`study` and write ``kd_comparison.png`` and ``gains.json`` to ``out``
     (and ``reference.npz``, the recorded reference, when the study recorded one).
@@ -153,7 +162,7 @@ def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
     """
     with tempfile.TemporaryDirectory(prefix="cake-drake-gains-") as tmp:
         table, results = study(base, kds, Path(tmp))
-        with OutputDir(out) as staged:
+        with OutputDir(out, "gains", GAINS_OUTPUTS, gains_inputs(base)) as staged:
             recorded = Path(tmp) / "reference" / "trajectory.npz"
             if recorded.exists():
                 shutil.copyfile(recorded, staged.path("reference.npz"))

@@ -131,7 +131,7 @@ def _snapshot(folder: Path) -> dict[str, str]:
 
 
 def _no_leftovers(folder: Path) -> None:
-    assert not [p for p in folder.parent.iterdir() if p.name.startswith(f".{folder.name}.")]
+    assert not [p for p in folder.iterdir() if p.name.startswith((".staging-", ".old-"))]
 
 
 def test_a_commit_replaces_the_folder_whole(tmp_path):
@@ -154,11 +154,13 @@ def test_a_failure_while_staging_leaves_the_old_folder_as_it_was(tmp_path):
     _no_leftovers(out)
 
 
-def test_a_folder_of_other_files_is_never_replaced(tmp_path):
+def test_a_folder_of_other_files_is_kept_around_the_outputs(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     s = Scenario()
     s.outputs.folder = str(tmp_path)
-    with pytest.raises(InputError, match="not a run's outputs"):
+    check(s)  # kept, not refused: the run replaces only what it wrote
+    (tmp_path / "plan.txt").write_text("my plan")
+    with pytest.raises(InputError, match="plan.txt: written by you"):
         check(s)
 
 
@@ -166,7 +168,8 @@ def test_staging_left_by_a_killed_process_is_removed(tmp_path):
     out = tmp_path / "out"
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                           capture_output=True, text=True).stdout.strip()  # fmt: skip
-    leftover = tmp_path / f".out.staging-{dead}"
+    out.mkdir()
+    leftover = out / f".staging-{dead}"
     leftover.mkdir()
     OutputDir(out).discard()
     assert not leftover.exists()

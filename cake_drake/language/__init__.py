@@ -29,6 +29,7 @@ from cake_drake.language.mapping import (
 )
 from cake_drake.language.methods import Method, MethodStep, method_bindings
 from cake_drake.language.report import (
+    SAYCAN_OUTPUTS,
     render_markdown,
     render_note,
     render_text,
@@ -77,4 +78,5 @@ __all__ = [
     "render_text",
     "side_by_side",
     "write_outputs",
+    "SAYCAN_OUTPUTS",
 ]

@@ -601,7 +601,14 @@ def problem_with_goal(problem: Problem, transcript: Transcript) -> Problem:
     composed = f"{text[:-1]}\n  (:goal {body}))\n"
     where = f"{transcript.source}:{transcript.goal_line}"
     predicates = set(problem.domain.predicates) | {"and", "not"}
-    names = set(re.findall(r"[a-z][a-z0-9_-]*", goal.lower())) - predicates
+    heads = set(re.findall(r"\(\s*([^()\s]+)", body.lower()))
+    unknown = sorted(heads - predicates)
+    if unknown:
+        raise InputError(
+            f"{where}: Goal: {goal}: unknown predicate {', '.join(unknown)}; the domain's "
+            f"predicates are {', '.join(sorted(problem.domain.predicates))}"
+        )
+    names = set(re.findall(r"[a-z][a-z0-9_-]*", goal.lower())) - predicates - heads
     missing = sorted(n for n in names if n not in problem.object_types)
     if missing and all(re.fullmatch(r"[a-z][a-z0-9_-]*", n) for n in missing):
         raise _GoalNotInProblem(

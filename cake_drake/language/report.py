@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
 
 from cake_drake.language.mapping import (
@@ -309,7 +310,11 @@ def render_markdown(analysis: Analysis) -> str:
     return "\n".join(out)
 
 
-def write_outputs(analysis: Analysis, out_dir: Path) -> list[Path]:
+#: The files a SayCan analysis writes.
+SAYCAN_OUTPUTS = ("plan.txt", "problem.pddl", "report.md")
+
+
+def write_outputs(analysis: Analysis, out_dir: Path, inputs: Sequence = ()) -> list[Path]:
     """Write ``plan.txt`` (transcribed PDDL plan), ``problem.pddl`` and ``report.md``.
 
     ``plan.txt`` holds the applied actions and, when a step failed, the failing
@@ -318,7 +323,7 @@ def write_outputs(analysis: Analysis, out_dir: Path) -> list[Path]:
     """
     from cake_drake.outputs.files import OutputDir
 
-    with OutputDir(out_dir) as staged:
+    with OutputDir(out_dir, "saycan", SAYCAN_OUTPUTS, inputs) as staged:
         lines = [str(a) for a in analysis.plan_actions]
         lines.append(f"; cost = {len(analysis.plan_actions)} (unit cost)")
         lines.append(f"; transcribed from {analysis.transcript.source} by cake_drake.saycan")
@@ -341,4 +346,5 @@ __all__ = [
     "render_text",
     "verdict_summary",
     "write_outputs",
+    "SAYCAN_OUTPUTS",
 ]
