@@ -47,7 +47,16 @@ from cake_drake.symbolic import (  # noqa: E402
 
 
 class CliParser(argparse.ArgumentParser):
-    """argparse, but a usage error is one :class:`InputError` line (exit 2), not usage text."""
+    """argparse, but a usage error is one :class:`InputError` line (exit 2), not usage text.
+    Every command takes ``--traceback`` (read by :func:`cake_drake.errors.run_cli`)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.add_argument(
+            "--traceback",
+            action="store_true",
+            help="when a plug-in fails, show its whole traceback (or set CAKE_DRAKE_TRACEBACK=1)",
+        )
 
     def error(self, message: str):  # type: ignore[override]
         raise InputError(f"{self.prog}: {message} (see --help)")
@@ -299,8 +308,8 @@ def gains_parser() -> argparse.ArgumentParser:
 
 
 def main_gains(argv: list[str] | None = None) -> int:
-    from cake_drake.gains import format_table, write_study
-    from cake_drake.pipeline import check_output_folder
+    from cake_drake.gains import GAINS_OUTPUTS, format_table, gains_inputs, write_study
+    from cake_drake.outputs.files import check_output_folder
     from cake_drake.scenario import ComputedTorque, Recorded, Scenario, load_scenario, portable_path
 
     args = gains_parser().parse_args(argv)
@@ -310,7 +319,7 @@ def main_gains(argv: list[str] | None = None) -> int:
         base.task.problem = portable_path(args.problem)
     if args.reference is not None:
         base.reference = Recorded(portable_path(args.reference), args.differentiate)
-    check_output_folder(args.out)
+    check_output_folder(args.out, "gains", GAINS_OUTPUTS, gains_inputs(base))
     table = write_study(base, args.kd, args.out)
     print(format_table(table))
     if not args.quiet:
@@ -409,9 +418,16 @@ def main_world(argv: list[str] | None = None) -> int:
     args = world_parser().parse_args(argv)
     if args.render is None and not args.meshcat:
         raise InputError("nothing to do: give --render out.png and/or --meshcat")
-    if args.render is not None and args.render.suffix.lower() != ".png":
-        raise InputError(f"{args.render}: the picture is written as PNG; name it *.png")
-    for line in show_problem(args.domain, args.problem, args.render, args.meshcat):
+    render = None
+    if args.render is not None:
+        from cake_drake.outputs.files import check_output_file
+
+        if args.render.suffix.lower() != ".png":
+            raise InputError(f"{args.render}: the picture is written as PNG; name it *.png")
+        render = check_output_file(args.render)
+        if not render.parent.is_dir():
+            raise InputError(f"{args.render}: cannot write the picture there (no such folder)")
+    for line in show_problem(args.domain, args.problem, render, args.meshcat):
         print(line)
     return EXIT_OK
 
@@ -480,14 +496,27 @@ def main_plan(argv: list[str] | None = None) -> int:
         if args.files
         else (BLOCKSWORLD_DOMAIN, PROBLEM_5)
     )
-    info = planner_info(args.planner)
+    from cake_drake.plugins import is_plugin
+
+    plugin = is_plugin(args.planner)
+    info = None if plugin else planner_info(args.planner)
     time_limit = _time_limit(args.time_limit)
+    target = None
     if args.output:
-        target = Path(args.output)
-        if target.is_dir() or not target.resolve().parent.is_dir():
-            raise InputError(f"{target}: cannot write the plan there (no such folder)")
+        from cake_drake.outputs.files import check_output_file
+
+        target = check_output_file(args.output)
+        if not target.parent.is_dir():
+            raise InputError(f"{args.output}: cannot write the plan there (no such folder)")
     problem = load_problem(domain, problem_path)
-    plan = solve_problem(problem, info.name, time_limit)
+    if plugin:
+        from cake_drake.pipeline import PLANNER_REGISTRY, call_planner
+        from cake_drake.plugins import resolve
+
+        planner = resolve(args.planner, PLANNER_REGISTRY, "planner", budget=lambda p, s: s)
+        plan = call_planner(planner, args.planner, problem, time_limit)
+    else:
+        plan = solve_problem(problem, info.name, time_limit)
 
     for action in plan.actions:
         print(action)
@@ -501,7 +530,7 @@ def main_plan(argv: list[str] | None = None) -> int:
         else:
             print(
                 f"note: the optimal plan for problem_5 has {PROBLEM_5_OPTIMAL_LENGTH} actions; "
-                f"{info.name} is satisficing (returns the first plan it finds), which is how "
+                f"{plan.planner} is satisficing (returns the first plan it finds), which is how "
                 "the exercise's '12' and gbfs-ff's 14 arise"
             )
     elif not plan.optimal:
@@ -509,8 +538,8 @@ def main_plan(argv: list[str] | None = None) -> int:
             f"note: {plan.planner} is satisficing (a shorter plan may exist); "
             f"--planner {OPTIMAL_PLANNER} finds the shortest, without a budget"
         )
-    if args.output:
-        write_plan(plan, args.output)
+    if target is not None:
+        write_plan(plan, target)
         print(f"plan written to {args.output}")
     return EXIT_OK
 
@@ -615,6 +644,7 @@ def saycan_parser() -> argparse.ArgumentParser:
 
 def main_saycan(argv: list[str] | None = None) -> int:
     from cake_drake.language import (
+        SAYCAN_OUTPUTS,
         analyse,
         load_transcript,
         render_text,
@@ -626,12 +656,13 @@ def main_saycan(argv: list[str] | None = None) -> int:
     planner_info(args.planner)
     time_limit = _time_limit(args.time_limit)
     out = args.out or Path("outputs") / "saycan" / Path(args.transcript).stem
-    check_output_folder(out)
+    inputs = (args.transcript, args.domain, args.problem)
+    check_output_folder(out, "saycan", SAYCAN_OUTPUTS, inputs)
     transcript = load_transcript(args.transcript)
     problem = load_problem(args.domain, args.problem, require_goal=False)
     analysis = analyse(transcript, problem, args.planner, time_limit)
     print(render_text(analysis), end="")
-    write_outputs(analysis, out)
+    write_outputs(analysis, out, inputs)
     print(f"wrote {out}/plan.txt, problem.pddl, report.md")
     return EXIT_OK if analysis.ok else EXIT_NO_PLAN
 

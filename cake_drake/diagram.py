@@ -32,6 +32,7 @@ from cake_drake.dynamic.reference import ReferenceTrajectory
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import TimedSolver
+from cake_drake.plugins import is_plugin
 from cake_drake.scenario import Recorded, Scenario, resolve_path
 from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
@@ -129,7 +130,12 @@ def _add_reference(
         return ReferenceSource(system, replay.executed_actions(), replay=replay), None
     plant = scene.plant
     kinematics = Kinematics(scene.control_plant)
-    solver = TimedSolver(make_solver(scenario.motion.ik, kinematics, scenario.seed))
+    spec = scenario.motion.ik
+    solver = TimedSolver(
+        make_solver(spec, kinematics, scenario.seed),
+        spec if is_plugin(spec) else None,
+        (kinematics.lower, kinematics.upper),
+    )
     motion = scenario.motion
     # Checks in the simulation's own world (bound once the Diagram is built).
     checker = CollisionChecker(list(scene.cubes), scene=scene) if motion.collision_check else None

@@ -19,6 +19,9 @@ EXIT_EXECUTION_FAILED = 3  # the plan could not be executed in the simulated wor
 EXIT_OUTPUT_FAILED = 4  # the outputs could not be written (full disk, read-only folder)
 EXIT_INTERRUPTED = 130  # Ctrl-C or SIGTERM: stopped, nothing half-written left behind
 
+#: Set (to anything but 0) to see a failing plug-in's whole traceback, as ``--traceback`` does.
+TRACEBACK_ENV = "CAKE_DRAKE_TRACEBACK"
+
 
 class CakeDrakeError(Exception):
     """Base class: a problem the user can act on, with a one-line message."""
@@ -81,6 +84,7 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     """
     import signal
 
+    _reopen_closed_streams()
     caught = (signal.SIGTERM, signal.SIGINT)
     previous = {s: signal.getsignal(s) for s in caught}
     try:
@@ -89,9 +93,14 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     except ValueError:  # not the main thread: leave signals alone
         previous = {}
     _signalled.clear()
+    given = sys.argv[1:] if argv is None else argv
+    show_trace = "--traceback" in given or os.environ.get(TRACEBACK_ENV, "") not in ("", "0")
     try:
         return main(argv)
     except CakeDrakeError as e:
+        trace = getattr(e, "trace", None)
+        if trace and show_trace:  # a plug-in's failure, for its author
+            print(trace, end="", file=sys.stderr)
         print(f"error: {e}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt as e:
@@ -116,6 +125,19 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
             signal.signal(s, handler)
 
 
+def _reopen_closed_streams() -> None:
+    """Standard output or error closed by the caller (``>&-``): what would be printed there
+    goes nowhere, and the command's work and exit code are unchanged."""
+    for name, fd in (("stdout", 1), ("stderr", 2)):
+        try:
+            os.fstat(fd)
+        except OSError:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), fd)  # the descriptor, for children too
+            setattr(sys, name, open(fd, "w", closefd=False))  # noqa: SIM115
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, "w", closefd=False))  # noqa: SIM115
+
+
 def _interrupted(name: str) -> int:
     how = " by SIGTERM" if name == "SIGTERM" else ""
     print(f"error: interrupted{how}; nothing was written", file=sys.stderr)
@@ -131,7 +153,8 @@ def exit_now(code: int) -> None:
     """
     for stream in (sys.stdout, sys.stderr):
         try:
-            stream.flush()
+            if stream is not None:
+                stream.flush()
         except (OSError, ValueError):  # a closed pipe, a closed stream: nothing to keep
             pass
     os._exit(code)

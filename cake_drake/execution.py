@@ -18,6 +18,8 @@ from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
 from cake_drake.diagram import CakeDiagram
+from cake_drake.errors import CakeDrakeError
+from cake_drake.plugins import is_plugin, raised_in_simulation
 from cake_drake.world.facts import Reading, read_facts, stack_offsets
 from cake_drake.world.faults import move_cube
 from cake_drake.world.scene import cube_poses
@@ -122,6 +124,19 @@ class ProgressBar:
             self._last_line = wall
 
 
+def plugin_specs(scenario) -> dict[str, str]:
+    """The scenario's plug-ins (``module:attribute``) and what each is."""
+    from cake_drake.scenario import Planned
+
+    named = [(scenario.task.planner, "planner"), (scenario.motion.ik, "IK solver")]
+    if isinstance(scenario.reference, Planned):
+        named.append((scenario.reference.action_source, "action source"))
+    factory = getattr(scenario.controller, "factory", None)
+    if factory:
+        named.append((factory, "controller"))
+    return {spec: what for spec, what in named if is_plugin(spec)}
+
+
 def execute(
     cake: CakeDiagram,
     max_sim_s: float = 300.0,
@@ -137,7 +152,22 @@ def execute(
     """
     simulator = Simulator(cake.diagram)
     context = simulator.get_mutable_context()
-    simulator.Initialize()
+    specs = plugin_specs(cake.scenario)
+
+    def advance(to: float | None = None) -> None:
+        """Simulate to ``to`` (initialize when None); what a plug-in raises inside Drake's
+        callbacks comes out as one line naming it (exit 3)."""
+        try:
+            simulator.Initialize() if to is None else simulator.AdvanceTo(to)
+        except (KeyboardInterrupt, CakeDrakeError):
+            raise
+        except (Exception, SystemExit) as e:
+            failed = raised_in_simulation(e, specs)
+            if failed is None:
+                raise
+            raise failed from None
+
+    advance()
     plant = cake.scene.plant
     pending = sorted(moves, key=lambda m: m.time)
     t0 = time.perf_counter()
@@ -146,7 +176,7 @@ def execute(
         t = min(t + chunk_s, max_sim_s)
         if pending and pending[0].time <= t:
             t = pending[0].time
-        simulator.AdvanceTo(t)
+        advance(t)
         while pending and pending[0].time <= t:
             m = pending.pop(0)
             plant_context = plant.GetMyMutableContextFromRoot(context)
@@ -158,7 +188,7 @@ def execute(
             break
     if error is None and not finished:
         error = f"time budget of {max_sim_s:g} s simulated ran out after {done} actions"
-    simulator.AdvanceTo(context.get_time() + settle_s)
+    advance(context.get_time() + settle_s)
     wall = time.perf_counter() - t0
     if progress:
         progress.update(context.get_time(), wall, done, final=True)

@@ -22,7 +22,7 @@ from cake_drake.diagram import CakeDiagram, build_diagram
 from cake_drake.errors import InputError, NoPlanError
 from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
-from cake_drake.plugins import resolve
+from cake_drake.plugins import PluginError, is_plugin, resolve
 from cake_drake.scenario import Generate, Recorded, Scenario, portable_path, resolve_path
 from cake_drake.symbolic import (
     DEFAULT_PLANNER,
@@ -84,8 +84,10 @@ class RunResult:
 
 
 def _range(value: float, lo: float, hi: float, what: str, unit: str = "") -> None:
-    if not (isinstance(value, int | float) and math.isfinite(value) and lo <= value <= hi):
-        raise InputError(f"{what} = {value!r} is outside {lo:g} to {hi:g}{unit}")
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if not (number and lo <= value <= hi and (isinstance(value, int) or math.isfinite(value))):
+        shown = repr(value) if len(repr(value)) <= 24 else repr(value)[:20] + "..."
+        raise InputError(f"{what} = {shown} is outside {lo:g} to {hi:g}{unit}")
 
 
 def _check_numbers(s: Scenario) -> None:
@@ -126,6 +128,19 @@ def _check_numbers(s: Scenario) -> None:
     _range(sim.max_sim_s, 1.0, 3600.0, "simulation.max_sim_s", " s")
     if s.task.time_limit is not None:
         _range(s.task.time_limit, 1e-3, 86400.0, "task.time_limit", " s")
+    g = s.task.generate
+    if g is not None:  # bounded before anything is generated
+        _range(g.blocks, 1, MAX_GENERATED_BLOCKS, "task.generate.blocks")
+        for name in ("max_height", "goal_max_height"):
+            value = getattr(g, name)
+            if value is not None:
+                _range(value, 1, MAX_GENERATED_BLOCKS, f"task.generate.{name}")
+    _range(s.seed, -(2**63), 2**63 - 1, "seed")
+
+
+#: The most blocks a generated problem may have: the planners answer 30 blocks in seconds,
+#: and no table of the world's slots holds their towers beyond that.
+MAX_GENERATED_BLOCKS = 30
 
 
 def generated_problem(g: Generate) -> str:
@@ -207,7 +222,9 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
         if not plan_path.is_file():
             raise InputError(f"{plan_path}: no such plan file")
     else:
-        planner = resolve(task.planner, PLANNER_REGISTRY, "planner")
+        planner = resolve(
+            task.planner, PLANNER_REGISTRY, "planner", budget=lambda problem, limit: limit
+        )
     if isinstance(s.reference, Recorded):
         if not s.reference.path:
             raise InputError("reference: !Recorded needs a path (a trajectory.npz from a run)")
@@ -226,8 +243,37 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     check_faults([f for f in s.faults if not isinstance(f, Slip)], view.blocks, n_actions=1 << 30)
     out = Path(s.outputs.folder) if write else None
     if out is not None:
-        check_output_folder(out)
+        check_output_folder(out, "run", run_outputs(s, generated), run_inputs(s))
     return Checked(s, problem, planner, out, generated)
+
+
+#: Every file a run may write to its output folder.
+RUN_OUTPUTS = (
+    "plan.txt", "trajectory.npz", "final_state.png", "joint4_torque.png", "summary.json",
+    "scenario.yaml",
+)  # fmt: skip
+
+
+def run_outputs(s: Scenario, generated: str | None) -> set[str]:
+    """The names this scenario's run writes (the optional ones only when it will)."""
+    names = set(RUN_OUTPUTS)
+    if generated is not None:
+        names.add("problem.pddl")
+    if s.visualization.meshcat:
+        names.add("replay.html")
+    return names
+
+
+def run_inputs(s: Scenario) -> list[Path]:
+    """The files a run reads: none may be among the outputs it replaces."""
+    paths = [s.task.domain]
+    if s.task.generate is None:
+        paths.append(s.task.problem)
+    if s.task.plan:
+        paths.append(s.task.plan)
+    if isinstance(s.reference, Recorded) and s.reference.path:
+        paths.append(s.reference.path)
+    return [resolve_path(p) for p in paths]
 
 
 #: Expected simulated seconds per action, to draw a random fault's time within the run.
@@ -254,13 +300,42 @@ def get_plan(checked: Checked) -> Plan:
         actions = read_plan(plan_path)
         label = f"file {plan_path}"
     else:
-        result = checked.planner(problem, task.time_limit)
-        if isinstance(result, Plan):
-            return result
-        if result is None:
-            raise NoPlanError(f"planner {task.planner} returned no plan")
+        return call_planner(checked.planner, task.planner, problem, task.time_limit)
+    return checked_plan(problem, actions, label)
+
+
+def call_planner(planner: Planner, spec: str, problem: Problem, time_limit: float | None) -> Plan:
+    """Plan with ``planner`` (resolved from ``spec``); what a plug-in returns is checked: a
+    :class:`Plan`, a sequence of ground actions, or None for no plan."""
+    result = planner(problem, time_limit)
+    if isinstance(result, Plan):
+        if is_plugin(spec):
+            checked_plan(problem, result.actions, spec)
+        return result
+    if result is None:
+        raise NoPlanError(f"planner {spec} returned no plan")
+    try:
         actions = tuple(result)
-        label = task.planner
+    except TypeError:
+        actions = None
+    if actions is None or not all(isinstance(a, GroundAction) for a in actions):
+        shown = (
+            type(result).__name__
+            if actions is None
+            else (
+                f"a {type(result).__name__} holding "
+                + ", ".join(sorted({type(a).__name__ for a in actions}))
+            )
+        )
+        raise PluginError(
+            f"planner {spec!r} returned {shown}; a planner returns a Plan, a sequence of "
+            "GroundAction (cake_drake.symbolic), or None for no plan"
+        )
+    return checked_plan(problem, actions, spec)
+
+
+def checked_plan(problem: Problem, actions: tuple[GroundAction, ...], label: str) -> Plan:
+    """The plan of ``actions`` once validated against ``problem`` (exit 1 if not valid)."""
     verdict_ = validate_plan(problem, actions)
     if not verdict_.ok:
         raise NoPlanError(
@@ -420,7 +495,10 @@ def run(
         from cake_drake.outputs.files import OutputDir
         from cake_drake.outputs.report import write_outputs
 
-        with OutputDir(checked.out) as staged:
+        names = run_outputs(scenario, checked.generated)
+        if meshcat is not None:
+            names.add("replay.html")
+        with OutputDir(checked.out, "run", names, run_inputs(scenario)) as staged:
             write_outputs(staged, result, worker, scenario.outputs.render, meshcat)
             if checked.generated is not None:
                 staged.path("problem.pddl").write_text(checked.generated)

@@ -11,11 +11,23 @@ checked, called and recorded exactly as the built-in ones are.
 from __future__ import annotations
 
 import importlib
+import signal
 import sys
+import sysconfig
+import threading
+import traceback
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
-from cake_drake.errors import InputError
+from cake_drake.errors import (
+    EXIT_BAD_INPUT,
+    EXIT_EXECUTION_FAILED,
+    CakeDrakeError,
+    InputError,
+)
+
+#: Exit codes of a plug-in that fails: while the run is checked and built, and while it runs.
+BEFORE, DURING = EXIT_BAD_INPUT, EXIT_EXECUTION_FAILED
 
 
 def is_plugin(spec: str) -> bool:
@@ -36,12 +48,14 @@ def load_attribute(spec: str, what: str) -> object:
         sys.path.append(cwd)
     try:
         module = importlib.import_module(module_name)
-    except ImportError as e:
-        raise InputError(f"{what} {spec!r}: cannot import module {module_name!r} ({e})") from None
-    except Exception as e:  # noqa: BLE001 - the user's module failed while importing
-        raise InputError(
-            f"{what} {spec!r}: importing {module_name!r} failed: {type(e).__name__}: {e}"
-        ) from None
+    except ModuleNotFoundError as e:
+        if e.name and module_name.startswith(e.name):
+            raise InputError(
+                f"{what} {spec!r}: cannot import module {module_name!r} ({e})"
+            ) from None
+        raise failure(e, f"{what} {spec!r}: importing {module_name!r}", BEFORE) from None
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - the user's module failed importing
+        raise failure(e, f"{what} {spec!r}: importing {module_name!r}", BEFORE) from None
     obj = module
     for part in attribute.split("."):
         try:
@@ -53,13 +67,23 @@ def load_attribute(spec: str, what: str) -> object:
     return obj
 
 
-def resolve(spec: str, registry: Mapping[str, Callable], what: str) -> Callable:
-    """The factory named by ``spec``: a ``registry`` entry or a ``module:attribute``."""
+def resolve(
+    spec: str,
+    registry: Mapping[str, Callable],
+    what: str,
+    exit_code: int = BEFORE,
+    budget: Callable[..., float | None] | None = None,
+) -> Callable:
+    """The factory named by ``spec``: a ``registry`` entry or a ``module:attribute``.
+
+    A plug-in's factory comes back :func:`guarded`: whatever it raises is one line naming
+    it, with ``exit_code``; ``budget(*args, **kwargs)`` gives a call's wall-clock budget.
+    """
     if is_plugin(spec):
         factory = load_attribute(spec, what)
         if not callable(factory):
             raise InputError(f"{what} {spec!r} is not callable (a {type(factory).__name__})")
-        return factory
+        return guard_factory(spec, what, factory, exit_code, budget)
     try:
         return registry[spec]
     except KeyError:
@@ -77,3 +101,148 @@ def require(obj: object, spec: str, what: str, attributes: tuple[str, ...]) -> N
             f"{what} {spec!r} returned a {type(obj).__name__} without "
             f"{', '.join(missing)} (the {what} protocol needs {', '.join(attributes)})"
         )
+
+
+# --- every call into user code goes through guarded() --------------------------------------
+
+
+class PluginError(CakeDrakeError):
+    """A plug-in raised, ended the program, returned garbage or overran its budget.
+
+    ``trace`` is the full traceback, shown with ``--traceback`` (or
+    ``CAKE_DRAKE_TRACEBACK=1``) for the plug-in's author.
+    """
+
+    def __init__(self, message: str, exit_code: int = BEFORE, trace: str | None = None):
+        super().__init__(message)
+        self.exit_code = exit_code
+        self.trace = trace
+
+
+class _Overrun(BaseException):
+    """Raised inside a plug-in at the end of its budget (not an Exception: a plug-in's own
+    ``except Exception`` does not swallow it)."""
+
+
+_LIBRARY = tuple(
+    str(Path(p).resolve())
+    for p in {sysconfig.get_paths()[k] for k in ("stdlib", "platstdlib", "purelib", "platlib")}
+)
+_OURS = str(Path(__file__).resolve().parent)
+
+
+def _is_user_file(filename: str) -> bool:
+    try:
+        path = str(Path(filename).resolve())
+    except (OSError, ValueError):
+        return False
+    if path.startswith(_OURS + "/") or filename.startswith("<"):
+        return False
+    return not path.startswith(_LIBRARY)
+
+
+def user_frame(tb) -> str | None:
+    """``file:line`` of the innermost frame of the traceback that is the user's own code
+    (not cake_drake, the standard library or an installed package)."""
+    where = None
+    for frame in traceback.extract_tb(tb):
+        if _is_user_file(frame.filename):
+            where = f"{frame.filename}:{frame.lineno}"
+    return where
+
+
+def failure(e: BaseException, label: str, exit_code: int, budget_s: float | None = None):
+    """The :class:`PluginError` for ``e`` raised by the plug-in ``label`` names."""
+    where = user_frame(e.__traceback__)
+    at = f" at {where}" if where else ""
+    trace = "".join(traceback.format_exception(e))
+    if isinstance(e, _Overrun):
+        message = f"{label} overran its budget of {budget_s:g} s{at}"
+    elif isinstance(e, SystemExit):
+        message = (
+            f"{label} called sys.exit({e.code!r}){at}: a plug-in returns or raises, it does "
+            "not end the program"
+        )
+    elif isinstance(e, RecursionError):
+        message = f"{label} recursed without end (RecursionError){at}"
+    else:
+        text = (str(e).strip().splitlines() or [""])[0]
+        message = f"{label} raised {type(e).__name__}{': ' + text if text else ''}{at}"
+    return PluginError(message, exit_code, trace)
+
+
+def guarded(
+    label: str,
+    fn: Callable,
+    *args,
+    exit_code: int = BEFORE,
+    budget_s: float | None = None,
+    **kwargs,
+):
+    """``fn(*args, **kwargs)`` for user code: whatever it raises (an exception, ``SystemExit``,
+    endless recursion) or a budget it overruns becomes one :class:`PluginError` line naming
+    ``label`` and the user's file:line. Ctrl-C stays an interrupt. The budget (wall clock)
+    is kept in the main thread, and only where no outer budget is running."""
+    timed = (
+        budget_s is not None
+        and threading.current_thread() is threading.main_thread()
+        and signal.getitimer(signal.ITIMER_REAL)[0] == 0
+    )
+    previous = None
+    if timed:
+
+        def overrun(signum, frame):
+            raise _Overrun()
+
+        previous = signal.signal(signal.SIGALRM, overrun)
+        signal.setitimer(signal.ITIMER_REAL, max(budget_s, 1e-3))
+    try:
+        return fn(*args, **kwargs)
+    except (KeyboardInterrupt, CakeDrakeError):
+        raise
+    except (Exception, SystemExit, _Overrun) as e:  # noqa: BLE001 - user code
+        raise failure(e, label, exit_code, budget_s) from None
+    finally:
+        if timed:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, previous)
+
+
+def guard_factory(
+    spec: str,
+    what: str,
+    factory: Callable,
+    exit_code: int = BEFORE,
+    budget: Callable[..., float | None] | None = None,
+) -> Callable:
+    """``factory`` wrapped so that every call to it is :func:`guarded` (for a plug-in);
+    a shipped factory is returned as it is."""
+    if not is_plugin(spec):
+        return factory
+
+    def call(*args, **kwargs):
+        budget_s = budget(*args, **kwargs) if budget is not None else None
+        return guarded(
+            f"{what} {spec!r}", factory, *args, exit_code=exit_code, budget_s=budget_s, **kwargs
+        )
+
+    call.__wrapped__ = factory  # type: ignore[attr-defined]
+    return call
+
+
+def raised_in_simulation(e: BaseException, specs: Mapping[str, str]) -> PluginError | None:
+    """A :class:`PluginError` (exit 3) when ``e``, out of a simulation, came from a plug-in's
+    code; ``specs`` maps each plug-in's ``module:attribute`` to what it is. None when the
+    exception did not come from user code."""
+    where = user_frame(e.__traceback__)
+    if where is None:
+        return None
+    filename = where.rsplit(":", 1)[0]
+    label = "a plug-in"
+    for spec, what in specs.items():
+        module = sys.modules.get(spec.partition(":")[0])
+        file = getattr(module, "__file__", None)
+        if file and Path(file).resolve() == Path(filename).resolve():
+            label = f"{what} {spec!r}"
+            break
+    return failure(e, label, DURING)

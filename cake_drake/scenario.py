@@ -43,6 +43,7 @@ from cake_drake.errors import InputError
 from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
 from cake_drake.symbolic import DEFAULT_PLANNER
+from cake_drake.symbolic.sexpr import read_text
 from cake_drake.world.faults import FaultConfig, Knock, Move, RandomFault, Slip
 from cake_drake.world.scene import WorldConfig
 
@@ -167,7 +168,11 @@ def resolve_path(path: str, base: Path | None = None) -> Path:
 
 def portable_path(path: str | Path) -> str:
     """``package://cake_drake/...`` for a shipped file, else the absolute path."""
-    p = Path(path).resolve()
+    given = Path(path).expanduser()
+    if given.exists() and not given.is_file() and not given.is_dir():
+        # A pipe (bash's <(...) is /dev/fd/N): resolving it names the pipe's inode.
+        return str(given.absolute())
+    p = given.resolve()
     try:
         return PACKAGE + p.relative_to(MODELS_DIR.resolve()).as_posix()
     except ValueError:
@@ -286,11 +291,19 @@ def _check_node(node: yaml.Node, tp, source: str, path: str) -> None:
         ok = _parses(int, value)
     elif tp is float:
         ok = _parses(float, value) and math.isfinite(float(value))
+    if tp is int and ok and not -(2**63) <= int(value) < 2**63:
+        raise InputError(
+            f"{_where(source, node)}: {path} = {_short(value)} is out of range (a 64-bit integer)"
+        )
     if not ok:
         raise InputError(
-            f"{_where(source, node)}: {path} = {value!r} is not a "
+            f"{_where(source, node)}: {path} = {_short(value)} is not a "
             f"{'finite number' if tp is float else tp.__name__}"
         )
+
+
+def _short(value: str) -> str:
+    return repr(value) if len(value) <= 24 else repr(value[:20] + "...")
 
 
 def _parses(kind, value: str) -> bool:
@@ -301,14 +314,54 @@ def _parses(kind, value: str) -> bool:
     return True
 
 
+#: The most YAML nodes a file may stand for once its aliases and merge keys are expanded
+#: (a scenario has a few hundred; a sweep a few thousand).
+MAX_YAML_NODES = 100_000
+
+
 def _top_level(text: str, source: str) -> yaml.Node | None:
     try:
-        return yaml.compose(text, Loader=yaml.SafeLoader)
+        root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         line = f":{mark.line + 1}" if mark else ""
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
         raise InputError(f"{source}{line}: not valid YAML ({problem})") from None
+    except RecursionError:
+        raise InputError(f"{source}: nested too deeply to be a scenario") from None
+    if root is not None and _expanded_size(root) > MAX_YAML_NODES:
+        raise InputError(
+            f"{source}: its aliases and merge keys expand to more than {MAX_YAML_NODES:,} "
+            "values; write the values out, or use fewer nested aliases"
+        )
+    return root
+
+
+def _expanded_size(root: yaml.Node) -> int:
+    """How many nodes ``root`` stands for with every alias expanded, counted without
+    expanding (each shared node once, by identity); stops counting past the bound."""
+    sizes: dict[int, int] = {}
+    order: list[yaml.Node] = []
+    stack, seen = [root], set()
+    while stack:  # children before parents
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        order.append(node)
+        if isinstance(node, yaml.SequenceNode):
+            stack.extend(node.value)
+        elif isinstance(node, yaml.MappingNode):
+            stack.extend(n for pair in node.value for n in pair)
+    for node in reversed(order):
+        if isinstance(node, yaml.SequenceNode):
+            children = node.value
+        elif isinstance(node, yaml.MappingNode):
+            children = [n for pair in node.value for n in pair]
+        else:
+            children = []
+        sizes[id(node)] = min(1 + sum(sizes.get(id(c), 1) for c in children), 1 << 62)
+    return sizes[id(root)]
 
 
 def parse_scenario(text: str, source: str = "<string>", name: str | None = None) -> Scenario:
@@ -331,6 +384,14 @@ def parse_scenario(text: str, source: str = "<string>", name: str | None = None)
             raise InputError(
                 f"{source} holds the scenarios {', '.join(keys)}: choose one with --name"
             )
+        seen: set[str] = set()
+        for key_node, _ in root.value:
+            if key_node.value in seen:
+                raise InputError(
+                    f"{_where(source, key_node)}: scenario {key_node.value!r} given twice; "
+                    "each scenario of a file needs a name of its own"
+                )
+            seen.add(key_node.value)
         entries = dict((k.value, v) for k, v in root.value)
         if name not in entries:
             raise InputError(
@@ -356,21 +417,14 @@ def _first_line(e: Exception) -> str:
 def load_scenario(path: str | Path, name: str | None = None) -> Scenario:
     """Read a scenario file; relative paths inside it are taken from the file's folder."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such scenario file") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: a folder, not a scenario file (*.yaml)") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: cannot read the scenario ({e})") from None
+    text = read_text(path, "scenario file (*.yaml)", allow_empty=True)
     scenario = parse_scenario(text, str(path), name)
     return resolved(scenario, path.resolve().parent)
 
 
 def scenario_names(path: str | Path) -> list[str]:
     """The names of the scenarios a file holds (empty for a single-scenario file)."""
-    root = _top_level(Path(path).read_text(encoding="utf-8"), str(path))
+    root = _top_level(read_text(path, "scenario file (*.yaml)", allow_empty=True), str(path))
     if not isinstance(root, yaml.MappingNode):
         return []
     keys = [k.value for k, _ in root.value]

@@ -275,7 +275,9 @@ def test_a_raising_and_a_dying_run_are_rows_and_the_sweep_finishes(tmp_path, mon
     ]
     explode, die, ok = rows
     assert explode["status"] == "failed" and not explode["success"]
-    assert explode["error"] == "ZeroDivisionError: a planner that divides by zero"
+    assert explode["error"].startswith(
+        "planner 'sweep_plugins:explode' raised ZeroDivisionError: a planner that divides by zero"
+    ) and explode["error"].endswith("sweep_plugins.py:6")
     assert die["status"] == "crashed" and "worker process died" in die["error"]
     assert ok["status"] == "done" and ok["success"], ok["message"]
     assert result.count("done") == 1

@@ -19,6 +19,7 @@ section, chosen by YAML tag):
 only function that tells the kinds apart.
 """
 
+import inspect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -29,7 +30,7 @@ from pydrake.systems.controllers import InverseDynamics, InverseDynamicsControll
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 
 from cake_drake.errors import InputError
-from cake_drake.plugins import load_attribute, require
+from cake_drake.plugins import PluginError, guarded, load_attribute, require
 from cake_drake.world.scene import Scene
 
 #: Built-in joint PD gains of the position controller (N m/rad, N m s/rad).
@@ -174,11 +175,48 @@ def make_controller(config: ControllerConfig) -> Controller:
     if not callable(factory):
         raise InputError(f"controller factory {config.factory!r} is not callable")
     try:
-        controller = factory(**config.options)
+        inspect.signature(factory).bind(**config.options)
     except TypeError as e:
         raise InputError(
             f"controller factory {config.factory!r} does not take options "
             f"{sorted(config.options)}: {e}"
         ) from None
+    except ValueError:  # no signature to read (a builtin): let the call tell
+        pass
+    label = f"controller factory {config.factory!r}"
+    controller = guarded(label, factory, **config.options)
     require(controller, config.factory, "controller", ("name", "arm_pd_gains", "add_to"))
-    return controller
+    return _GuardedController(controller, config.factory)
+
+
+class _GuardedController:
+    """A user's controller whose calls at build time are guarded, and whose ``add_to`` is
+    checked to return the arm's torque port (7 values)."""
+
+    def __init__(self, controller, spec: str) -> None:
+        self._controller = controller
+        self._spec = spec
+        self.name = controller.name
+
+    def __getattr__(self, name: str):
+        return getattr(self._controller, name)
+
+    def arm_pd_gains(self):
+        return guarded(f"controller {self._spec!r}", self._controller.arm_pd_gains)
+
+    def add_to(self, builder, scene, desired_state, desired_acceleration):
+        label = f"controller {self._spec!r}"
+        tau = guarded(
+            label, self._controller.add_to, builder, scene, desired_state, desired_acceleration
+        )
+        if not isinstance(tau, OutputPort) or tau.size() != 7:
+            shown = (
+                f"a port of size {tau.size()}"
+                if isinstance(tau, OutputPort)
+                else (f"a {type(tau).__name__}")
+            )
+            raise PluginError(
+                f"{label}: add_to returned {shown}; it returns the OutputPort of the arm's 7 "
+                "joint torques"
+            )
+        return tau

@@ -25,6 +25,7 @@ from cake_drake.geometric.waypoints import (
     WorldView,
     waypoints_for,
 )
+from cake_drake.plugins import DURING, PluginError, guarded
 from cake_drake.symbolic import GroundAction
 
 
@@ -269,17 +270,57 @@ def release_action(
     return Motion((place, retract), (q,), (), params.transit_clearance, params)
 
 
+#: Wall-clock budget of one call to a user's IK solver (s): tabletop waypoints take
+#: milliseconds; a solver still busy after this is not coming back.
+IK_BUDGET_S = 10.0
+
+
 class TimedSolver:
     """Wraps an :class:`IkSolver` and records the wall time of every solve (ms)."""
 
-    def __init__(self, solver: IkSolver) -> None:
+    def __init__(self, solver: IkSolver, spec: str | None = None, limits=None) -> None:
+        """``spec``: the ``module:attribute`` of a user's solver, whose every call is then
+        guarded (:func:`cake_drake.plugins.guarded`, :data:`IK_BUDGET_S` a call) and whose
+        answers are checked: seven finite angles within ``limits`` (lower, upper), or None."""
         self.solver = solver
         self.name = solver.name
         self.times_ms: list[float] = []
+        self.spec = spec
+        self.limits = limits
 
     def solve(self, X_WG, q_seed):
         t0 = time.perf_counter()
         try:
-            return self.solver.solve(X_WG, q_seed)
+            if self.spec is None:
+                return self.solver.solve(X_WG, q_seed)
+            label = f"IK solver {self.spec!r}"
+            q = guarded(
+                label, self.solver.solve, X_WG, q_seed, exit_code=DURING, budget_s=IK_BUDGET_S
+            )
+            return None if q is None else self._checked(q, label)
         finally:
             self.times_ms.append((time.perf_counter() - t0) * 1000)
+
+    def _checked(self, q, label: str) -> np.ndarray:
+        try:
+            q = np.asarray(q, dtype=float)
+        except (TypeError, ValueError):
+            raise PluginError(
+                f"{label} returned {type(q).__name__} {q!r:.60}; it returns 7 joint angles "
+                "(rad) or None",
+                DURING,
+            ) from None
+        why = None
+        if q.shape != (7,):
+            why = f"an array of shape {q.shape}, not 7 joint angles"
+        elif not np.all(np.isfinite(q)):
+            why = f"non-finite angles {np.round(q, 3).tolist()}"
+        elif self.limits is not None:
+            lo, hi = self.limits
+            out = [i + 1 for i in range(7) if not lo[i] - 1e-6 <= q[i] <= hi[i] + 1e-6]
+            if out:
+                j = out[0] - 1
+                why = f"joint {out[0]} at {q[j]:g} rad, outside its limits [{lo[j]:g}, {hi[j]:g}]"
+        if why:
+            raise PluginError(f"{label} returned {why}; it returns 7 joint angles or None", DURING)
+        return q

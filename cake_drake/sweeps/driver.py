@@ -118,8 +118,10 @@ def _rows_on_disk(out: Path) -> dict[str, dict]:
     for path in sorted((out / "runs").glob("*/row.json")):
         try:
             row = json.loads(path.read_text())
-        except (OSError, ValueError):
+        except (OSError, ValueError, UnicodeDecodeError):
             continue  # a row cut short: the run counts as not finished
+        if not isinstance(row, dict) or not {"run_id", "status"} <= row.keys():
+            continue  # not a row this sweep wrote: the run is run again
         rows[path.parent.name] = row
     return rows
 
@@ -141,15 +143,19 @@ def _keep(out: Path, job: dict, answer: dict) -> dict:
     return row
 
 
+#: What a sweep writes into its folder (each run's outputs in runs/<id>/).
+SWEEP_OUTPUTS = ("sweep.yaml", "results.parquet", "results.csv", "plots", "runs")
+
+
 def run_sweep(
     sweep: Sweep, out: str | Path, engine, resume: bool = False, progress: bool = True
 ) -> SweepResult:
     """Run every run of ``sweep`` on ``engine`` (:class:`LocalPool` or :class:`RayCluster`)
     into ``out``; a run that fails or crashes is a row, and Ctrl-C keeps what finished."""
-    from cake_drake.outputs.files import check_output_folder
+    from cake_drake.outputs.files import check_output_folder, claim_folder
 
-    out = Path(out)
-    check_output_folder(out, whole=False)
+    out = check_output_folder(out, "sweep", SWEEP_OUTPUTS)  # ~ expanded, links followed
+    sweep.check()
     jobs = prepare(sweep, out)
     on_disk = _rows_on_disk(out) if out.exists() else {}
     if on_disk and not resume:
@@ -157,7 +163,8 @@ def run_sweep(
             f"{out}: holds a sweep already ({len(on_disk)} runs); --resume to finish it, "
             "or choose another --out"
         )
-    out.mkdir(parents=True, exist_ok=True)
+    getattr(engine, "start", lambda: None)()  # a sweep that cannot start writes nothing
+    claim_folder(out, "sweep", SWEEP_OUTPUTS)
     if sweep.text:
         (out / "sweep.yaml").write_text(sweep.text)
     rows: dict[str, dict] = {}

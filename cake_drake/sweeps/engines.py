@@ -27,9 +27,20 @@ Event = tuple
 CRASHED = "the worker process died while running this run (a crash, or it was killed)"
 
 
-def _quiet_worker() -> None:
-    """Workers leave Ctrl-C to the sweep, which stops them itself."""
+def _quiet_worker(parent: int | None = None) -> None:
+    """Workers leave Ctrl-C to the sweep, which stops them itself, and end with it: on
+    Linux the kernel kills a worker whose sweep is gone (even by SIGKILL), and a worker
+    whose sweep was already gone when it started ends at once."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        import ctypes
+
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # not Linux: the pool's own pipes end it later
+        pass
+    if parent is not None and os.getppid() != parent:
+        os._exit(1)
 
 
 def _stop(pool: ProcessPoolExecutor) -> None:
@@ -76,7 +87,9 @@ class LocalPool:
         """Run from ``queue`` on a fresh pool until it is empty (return []) or a worker
         dies (return the runs that were in flight, for the caller to retry)."""
         context = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(workers, mp_context=context, initializer=_quiet_worker)
+        pool = ProcessPoolExecutor(
+            workers, mp_context=context, initializer=_quiet_worker, initargs=(os.getpid(),)
+        )
         running: dict = {}
 
         def refill():
@@ -164,6 +177,10 @@ class RayCluster:
                 f"--ray {self.address}: no Ray cluster answers there (give HOST:PORT of a "
                 "head started with `ray start --head`, or auto on one of its nodes)"
             ) from None
+
+    def start(self) -> None:
+        """Start or join Ray now, before the sweep writes anything."""
+        self._init()
 
     def events(self, jobs: Sequence[dict]) -> Iterator[Event]:
         ray = self._init()

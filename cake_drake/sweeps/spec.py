@@ -47,6 +47,8 @@ from cake_drake.scenario import (
     resolved,
 )
 
+#: The most runs one sweep may hold (checked before it is expanded).
+MAX_RUNS = 10_000
 SWEEP_KEYS = ("description", "base", "scenario", "grid", "cases", "seeds", "collect")
 #: Fields a sweep sets itself: every run writes to its own folder.
 RESERVED = ("outputs.folder",)
@@ -115,6 +117,14 @@ class Sweep:
         sweep._check_unique()
         return sweep
 
+    @property
+    def size(self) -> int:
+        """How many runs the sweep is, computed without expanding it."""
+        n = max(len(self.cases), 1) * (len(self.seeds) if self.seeds is not None else 1)
+        for _, values in self.grid:
+            n *= len(values)
+        return n
+
     def runs(self) -> list[Run]:
         """Every run, in order: cases, then the grid's combinations, then seeds."""
         out = []
@@ -136,6 +146,29 @@ class Sweep:
                     out.append(Run(len(out), params, scenario))
         return out
 
+    def check(self) -> None:
+        """Every value the sweep will run, through the run's own check (:func:`pipeline.check`),
+        without expanding the grid: the base, each case, and each axis value on the base
+        (with the first case, where there are cases). One line naming the value, exit 2."""
+        from cake_drake.pipeline import check
+
+        def checked(settings, what: str) -> None:
+            scenario = self.base
+            for path, node in settings:
+                scenario = apply(scenario, path, node)
+            try:
+                check(resolved(scenario, self.folder), write=False)
+            except InputError as e:
+                raise InputError(f"{self.source}: {what}: {e}") from None
+
+        cases = list(zip(self.case_names, self.cases, strict=True)) or [(None, [])]
+        for name, case in cases:
+            checked(case, f"case {name}" if name is not None else "the base scenario")
+        first = cases[0][1]
+        for path, values in self.grid:
+            for node in values:
+                checked([*first, (path, node)], f"grid {path} = {_label_node(node)}")
+
     @property
     def columns(self) -> list[str]:
         """The parameter columns: every path a case, the grid or the seeds set."""
@@ -154,6 +187,11 @@ class Sweep:
         return axes or (["case"] if self.cases else [])
 
     def _check_unique(self) -> None:
+        if self.size > MAX_RUNS:
+            raise InputError(
+                f"{self.source}: {self.size:,} runs (cases x grid x seeds) is more than one "
+                f"sweep holds ({MAX_RUNS:,}); split it into several sweeps"
+            )
         grid_paths = [p for p, _ in self.grid]
         twice = sorted({p for p in grid_paths if grid_paths.count(p) > 1})
         if twice:
@@ -280,6 +318,11 @@ def _label(value: object) -> object:
     return yaml.safe_dump(value, default_flow_style=True, width=10**6).strip()
 
 
+def _label_node(node: yaml.Node) -> str:
+    text = yaml.serialize(node, Dumper=yaml.SafeDumper).strip().removesuffix("...").strip()
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def run_id(run: Run, collect: list[str]) -> str:
     """A stable name for a run: its index and a hash of everything that shapes it."""
     text = yaml_dump_typed(run.scenario) + "\n".join(collect)
@@ -292,6 +335,8 @@ def _seed_list(value: object, where: str) -> list[int]:
     if isinstance(value, int):
         if value < 1:
             raise InputError(f"{where}: seeds = {value} runs nothing; give a count >= 1")
+        if value > MAX_RUNS:
+            raise InputError(f"{where}: seeds = {value} is more than {MAX_RUNS:,} runs")
         return list(range(value))
     if (
         isinstance(value, list)
@@ -307,15 +352,10 @@ def _seed_list(value: object, where: str) -> list[int]:
 
 def load_sweep(path: str | Path) -> Sweep:
     """Read and check a sweep file (see the module's docstring for the format)."""
+    from cake_drake.symbolic.sexpr import read_text
+
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such sweep file") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: a folder, not a sweep file (*.yaml)") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise InputError(f"{path}: cannot read the sweep ({e})") from None
+    text = read_text(path, "sweep file (*.yaml)")
     return parse_sweep(text, str(path), path.resolve().parent)
 
 

@@ -54,17 +54,21 @@ MAX_INPUT_BYTES = 16 * 1024 * 1024
 MAX_DEPTH = 64
 
 
-def read_text(path: str | Path, what: str = "file") -> str:
+def read_text(path: str | Path, what: str = "file", allow_empty: bool = False) -> str:
     """Return the text of ``path``, or raise one-line :class:`InputError`.
 
-    Missing files, directories, unreadable files, binary data (NUL bytes or
-    invalid UTF-8) and files with nothing but whitespace are refused here.
+    Missing files, directories, devices, unreadable files, files over
+    :data:`MAX_INPUT_BYTES` (refused unread; a pipe is read up to the bound), binary data
+    (NUL bytes or invalid UTF-8) and, unless ``allow_empty``, files with nothing but
+    whitespace are refused here. Every file the project reads comes through here.
     """
-    p = Path(path)
+    p = Path(path).expanduser()
     if not p.exists():
         raise InputError(f"{path}: no such {what}")
     if p.is_dir():
         raise InputError(f"{path}: is a directory, expected a {what}")
+    if p.is_char_device() or p.is_block_device() or p.is_socket():
+        raise InputError(f"{path}: is a device or socket, not a {what}")
     try:
         size = p.stat().st_size
         if size > MAX_INPUT_BYTES:
@@ -87,7 +91,7 @@ def read_text(path: str | Path, what: str = "file") -> str:
         raise InputError(
             f"{path}: not a UTF-8 text file (invalid byte at offset {e.start}); expected a {what}"
         ) from None
-    if not text.strip():
+    if not text.strip() and not allow_empty:
         raise InputError(f"{path}: is empty; expected a {what}")
     return text.removeprefix("\ufeff")
 

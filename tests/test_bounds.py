@@ -1,0 +1,174 @@
+"""Every input bounded before work, and sweeps checked like runs.
+
+Each case is a small file that would cost a user an hour, a MemoryError or a traceback
+if it were read, expanded or run first and checked after.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SMOKE = ROOT / "models" / "sweeps" / "smoke.yaml"
+
+BOMB = """\
+a: &a {x: 1, y: 1, z: 1, w: 1, v: 1, u: 1, t: 1, s: 1, r: 1}
+b: &b {<<: *a, p: [*a, *a, *a, *a, *a, *a, *a, *a, *a]}
+c: &c {p: [*b, *b, *b, *b, *b, *b, *b, *b, *b]}
+d: &d {p: [*c, *c, *c, *c, *c, *c, *c, *c, *c]}
+e: &e {p: [*d, *d, *d, *d, *d, *d, *d, *d, *d]}
+f: &f {p: [*e, *e, *e, *e, *e, *e, *e, *e, *e]}
+g: &g {p: [*f, *f, *f, *f, *f, *f, *f, *f, *f]}
+"""
+
+
+def cake(command: str, *args: str, cwd: Path, timeout: float = 120):
+    return subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{command}", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+
+
+def refused(r, *words: str) -> None:
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    for w in words:
+        assert w in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        (BOMB, ["aliases and merge keys expand to more than 100,000"]),
+        ("seed: " + "9" * 400 + "\n", ["s.yaml:1: seed = ", "out of range"]),
+        ("world: {time_step: 1" + "0" * 400 + "}\n", ["is not a finite number"]),
+        ("task:\n  generate: {blocks: 3000000}\n", ["task.generate.blocks = 3000000 is outside"]),
+    ],
+    ids=["alias bomb", "400 digits", "huge float", "3 million blocks"],
+)
+def test_a_scenario_that_would_expand_or_overflow_is_refused_fast(tmp_path, text, words):
+    (tmp_path / "s.yaml").write_text(text)
+    refused(cake("run", "--scenario", "s.yaml", "--out", "o", cwd=tmp_path), *words)
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_device_as_a_scenario_or_sweep_is_refused_unread(tmp_path):
+    refused(cake("run", "--scenario", "/dev/zero", cwd=tmp_path), "is a device")
+    refused(cake("sweep", "/dev/zero", cwd=tmp_path), "is a device")
+
+
+def test_a_scenario_over_16_mib_is_refused_unread(tmp_path):
+    big = tmp_path / "big.yaml"
+    with big.open("w") as f:
+        f.write("seed: 1\n")
+        f.write("#" * (17 * 2**20) + "\n")
+    refused(cake("run", "--scenario", "big.yaml", cwd=tmp_path), "too large")
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("seeds: 1000000000\n", ["seeds = 1000000000 is more than 10,000 runs"]),
+        (
+            "grid:\n  seed: [{}]\n  world.time_step: [{}]\n".format(
+                ", ".join(str(i) for i in range(1000)), ", ".join(["0.01"] * 1000)
+            ),
+            ["1,000,000 runs (cases x grid x seeds) is more than one sweep holds"],
+        ),
+        ("grid:\n  world.time_step: [0.01, 100]\n", ["grid world.time_step = 100", "outside"]),
+        ("grid:\n  task.planner: [auto, nosuch]\n", ["grid task.planner = nosuch", "unknown"]),
+        (
+            "cases:\n  - {name: far, world.slot_radius: 5}\n",
+            ["case far", "world.slot_radius = 5.0 is outside"],
+        ),
+    ],
+    ids=["a billion seeds", "a million-run grid", "bad time step", "bad planner", "bad case"],
+)
+def test_a_sweep_is_checked_like_its_runs_before_anything_runs(tmp_path, text, words):
+    (tmp_path / "sweep.yaml").write_text(text)
+    t0 = time.monotonic()
+    r = cake("sweep", "sweep.yaml", "--out", "out", "--quiet", cwd=tmp_path)
+    refused(r, *words)
+    assert not (tmp_path / "out").exists()
+    assert time.monotonic() - t0 < 100  # generous: expanding would take far longer
+
+
+def test_an_npz_whose_arrays_are_huge_is_refused_by_its_headers(tmp_path):
+    np.savez_compressed(
+        tmp_path / "bomb.npz", t=np.zeros(4), q=np.zeros((50_000_000, 7)), gripper=np.zeros(4)
+    )
+    assert (tmp_path / "bomb.npz").stat().st_size < 5 * 2**20
+    r = cake("run", "--reference", "bomb.npz", cwd=tmp_path)
+    refused(r, "its arrays hold more than 256 MiB", "'q' has shape (50000000, 7)")
+
+
+def test_resume_reruns_rows_that_are_not_rows(tmp_path):
+    from cake_drake.sweeps.driver import _rows_on_disk
+
+    runs = tmp_path / "runs"
+    for name, text in [("a", "[]"), ("b", '{"status": "done"}'), ("c", "\xff"), ("d", None)]:
+        (runs / name).mkdir(parents=True)
+        if text is not None:
+            (runs / name / "row.json").write_text(text, encoding="latin-1")
+    (runs / "e").mkdir()
+    (runs / "e" / "row.json").write_text(json.dumps({"run_id": "e", "status": "done"}))
+    assert list(_rows_on_disk(tmp_path)) == ["e"]
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"  # a zombie has ended; only its parent's reaping is left
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
+def test_the_workers_of_a_killed_sweep_die_with_it(tmp_path):
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.sweep", str(SMOKE), "--out", "out", "--workers", "1"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    workers: list[int] = []
+    deadline = time.monotonic() + 120
+    while not workers:  # the sweep's own signal: its worker process is there
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "no worker started"
+        workers = [
+            p
+            for p in _children(proc.pid)
+            if b"spawn_main" in Path(f"/proc/{p}/cmdline").read_bytes()
+        ]
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGKILL)
+    proc.communicate(timeout=60)
+    deadline = time.monotonic() + 60
+    while any(_alive(w) for w in workers):
+        assert time.monotonic() < deadline, "a worker outlived its sweep"
+        time.sleep(0.1)

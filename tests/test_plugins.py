@@ -1,0 +1,217 @@
+"""A plug-in is user code: whatever it does, the user gets one line and a documented code.
+
+Each hostile plug-in is a small module written into the test's folder and named on the
+real command line, as a user would: it raises, returns garbage, recurses without end,
+ends the program, or sleeps past its budget.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+PLUGIN = """
+import sys
+import time
+
+import numpy as np
+
+from cake_drake.geometric.ik import DrakeIk
+from cake_drake.symbolic import GroundAction
+
+
+def raises(problem, time_limit):
+    return 1 / 0
+
+
+def an_int(problem, time_limit):
+    return 7
+
+
+def strings(problem, time_limit):
+    return ["(unstack a b)", "(put-down a)"]
+
+
+def endless(problem, time_limit):
+    return endless(problem, time_limit)
+
+
+def exits(problem, time_limit):
+    sys.exit(0)
+
+
+def sleeps(problem, time_limit):
+    time.sleep(600)
+
+
+def invalid(problem, time_limit):
+    return [GroundAction("stack", ("a", "e"))]
+
+
+class Garbage:
+    name = "garbage"
+
+    def __init__(self, kinematics, seed, answer):
+        self.inner = DrakeIk(kinematics, seed)
+        self.answer = answer
+
+    def solve(self, X_WG, q_seed):
+        q = self.inner.solve(X_WG, q_seed)
+        return self.answer(q)
+
+
+def ik_nan(kinematics, seed):
+    return Garbage(kinematics, seed, lambda q: np.full(7, np.nan))
+
+
+def ik_far(kinematics, seed):
+    return Garbage(kinematics, seed, lambda q: np.full(7, 1e6))
+
+
+def ik_shape(kinematics, seed):
+    return Garbage(kinematics, seed, lambda q: q[:3])
+
+
+def ik_raises(kinematics, seed):
+    def boom(q):
+        raise ValueError("no luck today")
+    return Garbage(kinematics, seed, boom)
+
+
+def ik_exits(kinematics, seed):
+    return Garbage(kinematics, seed, lambda q: sys.exit(0))
+
+
+def ik_factory_raises(kinematics, seed):
+    raise RuntimeError("cannot build")
+
+
+def controller_raises(**options):
+    raise KeyError("gains")
+"""
+
+
+def run(*args: str, cwd: Path, command: str = "run"):
+    return subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{command}", *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": f"{cwd}{os.pathsep}{ROOT}"},
+    )
+
+
+@pytest.fixture
+def folder(tmp_path):
+    (tmp_path / "hostile.py").write_text(PLUGIN)
+    return tmp_path
+
+
+def one_line(r, code: int, *words: str) -> None:
+    assert r.returncode == code, r.stderr
+    assert "Traceback" not in r.stderr, r.stderr
+    lines = [line for line in r.stderr.splitlines() if not line.startswith("simulating")]
+    assert len(lines) == 1, r.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+LINE = {
+    "raises": "hostile.py:12",
+    "endless": "hostile.py:24",
+    "exits": "hostile.py:28",
+    "sleeps": "hostile.py:32",
+}
+
+
+@pytest.mark.parametrize(
+    "planner, words",
+    [
+        ("raises", ["raised ZeroDivisionError: division by zero", LINE["raises"]]),
+        ("an_int", ["returned int", "a planner returns a Plan"]),
+        ("strings", ["returned a list holding str"]),
+        ("endless", ["recursed without end", LINE["endless"]]),
+        ("exits", ["called sys.exit(0)", LINE["exits"]]),
+        ("sleeps", ["overran its budget of 1 s", LINE["sleeps"]]),
+    ],
+)
+def test_a_hostile_planner_is_one_line_and_exit_2_with_nothing_written(folder, planner, words):
+    r = run("--planner", f"hostile:{planner}", "--time-limit", "1", "--out", "o", cwd=folder)
+    one_line(r, 2, f"planner 'hostile:{planner}'", *words)
+    assert not (folder / "o").exists()
+
+
+def test_an_invalid_plan_from_a_planner_is_no_plan(folder):
+    r = run("--planner", "hostile:invalid", "--out", "o", cwd=folder)
+    one_line(r, 1, "not a valid plan")
+
+
+@pytest.mark.parametrize(
+    "ik, words",
+    [
+        ("ik_nan", ["returned non-finite angles"]),
+        ("ik_far", ["joint 1 at 1e+06 rad, outside its limits"]),
+        ("ik_shape", ["an array of shape (3,), not 7 joint angles"]),
+        ("ik_raises", ["raised ValueError: no luck today", "hostile.py:"]),
+        ("ik_exits", ["called sys.exit(0)", "hostile.py:"]),
+    ],
+)
+def test_a_hostile_ik_solver_is_one_line_and_exit_3(folder, ik, words):
+    r = run("--ik", f"hostile:{ik}", "--out", "o", "--quiet", cwd=folder)
+    one_line(r, 3, f"IK solver 'hostile:{ik}'", *words)
+    assert not (folder / "o").exists()
+
+
+def test_a_failing_factory_is_exit_2(folder):
+    r = run("--ik", "hostile:ik_factory_raises", "--out", "o", "--quiet", cwd=folder)
+    one_line(r, 2, "IK solver 'hostile:ik_factory_raises' raised RuntimeError: cannot build")
+
+
+def test_a_failing_controller_factory_is_exit_2(folder):
+    (folder / "s.yaml").write_text(
+        "controller: !CustomController {factory: hostile:controller_raises}\n"
+    )
+    r = run("--scenario", "s.yaml", "--out", "o", cwd=folder)
+    one_line(r, 2, "controller factory 'hostile:controller_raises' raised KeyError", "hostile.py:")
+
+
+def test_a_module_that_exits_while_importing_is_not_a_success(folder):
+    (folder / "quits.py").write_text("import sys\nsys.exit(0)\n")
+    r = run("--planner", "quits:anything", "--out", "o", cwd=folder)
+    one_line(r, 2, "called sys.exit(0)", "quits.py:2")
+
+
+@pytest.mark.parametrize("how", ["flag", "environment"])
+def test_the_whole_traceback_is_there_for_the_plugins_author(folder, how):
+    args = ["--planner", "hostile:raises", "--out", "o"]
+    if how == "flag":
+        r = run(*args, "--traceback", cwd=folder)
+    else:
+        os.environ["CAKE_DRAKE_TRACEBACK"] = "1"
+        try:
+            r = run(*args, cwd=folder)
+        finally:
+            del os.environ["CAKE_DRAKE_TRACEBACK"]
+    assert r.returncode == 2
+    assert "Traceback (most recent call last)" in r.stderr and "1 / 0" in r.stderr
+    assert r.stderr.splitlines()[-1].startswith("error: planner 'hostile:raises' raised")
+
+
+def test_plan_takes_a_plugin_planner_as_run_does(folder):
+    (folder / "mine.py").write_text(
+        "from cake_drake.symbolic import solve_problem\n"
+        "def planner(problem, time_limit):\n"
+        "    return solve_problem(problem, 'astar-lmcut', time_limit).actions\n"
+    )
+    r = run("--planner", "mine:planner", cwd=folder, command="plan")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[0] == "(unstack a b)"
+    r = run("--planner", "hostile:raises", cwd=folder, command="plan")
+    one_line(r, 2, "planner 'hostile:raises' raised ZeroDivisionError", LINE["raises"])
