@@ -172,3 +172,26 @@ def test_the_workers_of_a_killed_sweep_die_with_it(tmp_path):
     while any(_alive(w) for w in workers):
         assert time.monotonic() < deadline, "a worker outlived its sweep"
         time.sleep(0.1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_to_a_sweeps_process_group_prints_one_line(tmp_path, sig):
+    """As a terminal's Ctrl-C does: every process of the sweep gets the signal; the user
+    sees one line, never a helper's BrokenPipeError."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.sweep", str(SMOKE), "--out", "out", "--quiet",
+         "--workers", "2"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 300
+    while not list((tmp_path / "out").glob("runs/*/row.json")):  # the first run finished
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "no run finished"
+        time.sleep(0.1)
+    os.killpg(proc.pid, sig)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
+    assert err.splitlines() == ["error: interrupted: what finished is kept; --resume runs the rest"]

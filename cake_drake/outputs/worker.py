@@ -79,25 +79,25 @@ def _serve(conn, parent_end, warm, args, what: str, after, warmed) -> None:
     if after is not None:
         after.wait(WARM_WAIT_S)
     try:
-        handle = warm(*args)
-    except Exception as e:  # noqa: BLE001 - reported to the parent as one line
-        conn.send(("error", f"output worker failed to start: {e}"))
-        return
-    finally:
-        if warmed is not None:
-            warmed.set()
-    while True:
         try:
+            handle = warm(*args)
+        except Exception as e:  # noqa: BLE001 - reported to the parent as one line
+            conn.send(("error", f"output worker failed to start: {e}"))
+            return
+        finally:
+            if warmed is not None:
+                warmed.set()
+        while True:
             job = conn.recv()
-        except EOFError:
-            return
-        if job is None:
-            return
-        try:
-            handle(job)
-            conn.send(("ok", what))
-        except Exception as e:  # noqa: BLE001
-            conn.send(("error", f"writing the {what} output failed: {e}"))
+            if job is None:
+                return
+            try:
+                handle(job)
+                conn.send(("ok", what))
+            except Exception as e:  # noqa: BLE001
+                conn.send(("error", f"writing the {what} output failed: {e}"))
+    except (EOFError, OSError):  # the parent is gone (stopped, killed): nothing to tell
+        return
 
 
 #: How long (s) the plot's helper waits for the picture's to warm up before it starts anyway.
