@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cake_drake.errors import InputError
+
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "models" / "sweeps" / "smoke.yaml"
 
@@ -195,3 +197,24 @@ def test_a_signal_to_a_sweeps_process_group_prints_one_line(tmp_path, sig):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
     assert err.splitlines() == ["error: interrupted: what finished is kept; --resume runs the rest"]
+
+
+def test_a_file_where_a_sweep_keeps_a_runs_folder_is_exit_2_up_front(tmp_path):
+    from cake_drake.sweeps import LocalPool, load_sweep, run_sweep
+    from cake_drake.sweeps.driver import prepare
+
+    sweep = load_sweep(SMOKE)
+    out = tmp_path / "out"
+    run_id = prepare(sweep, out)[0]["id"]
+    from cake_drake.outputs.files import claim_folder
+    from cake_drake.sweeps.driver import SWEEP_OUTPUTS
+
+    claim_folder(out, "sweep", SWEEP_OUTPUTS)  # an earlier sweep's folder
+    (out / "runs").mkdir()
+    (out / "runs" / run_id).write_text("in the way")
+    with pytest.raises(InputError, match="a file where the sweep keeps a run's folder"):
+        run_sweep(sweep, out, LocalPool(1), progress=False)
+    assert sorted(p.name for p in out.rglob("*") if p.name != ".cake_drake-outputs") == [
+        "runs",
+        run_id,
+    ]

@@ -157,6 +157,10 @@ def run_sweep(
     out = check_output_folder(out, "sweep", SWEEP_OUTPUTS)  # ~ expanded, links followed
     sweep.check()
     jobs = prepare(sweep, out)
+    runs = out / "runs"
+    for path in (runs, *(runs / job["id"] for job in jobs)):
+        if os.path.lexists(path) and not path.is_dir():
+            raise InputError(f"{path}: a file where the sweep keeps a run's folder; remove it")
     on_disk = _rows_on_disk(out) if out.exists() else {}
     if on_disk and not resume:
         raise InputError(
