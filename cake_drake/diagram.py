@@ -32,7 +32,7 @@ from cake_drake.dynamic.reference import ReferenceTrajectory
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import TimedSolver
-from cake_drake.plugins import is_plugin
+from cake_drake.plugins import PluginError, is_plugin
 from cake_drake.scenario import Recorded, Scenario, resolve_path
 from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
@@ -82,7 +82,9 @@ class ReferenceSource:
             prog = self.waypoint_ik.progress(self.waypoint_ik.GetMyContextFromRoot(root_context))
             source_context = self.action_source.GetMyContextFromRoot(root_context)
             command = self.action_source.GetOutputPort("action").Eval(source_context)
-            finished = command.action is None and command.index == prog.done
+            # (a user's source may give anything: WaypointIk reports that as the error)
+            finished = getattr(command, "action", 0) is None
+            finished = finished and getattr(command, "index", None) == prog.done
             finished = finished and prog.working < 0
             error = prog.error
             if error is None and hasattr(self.action_source, "error"):
@@ -168,13 +170,24 @@ def _add_reference(
             settings,
         ),
     )
-    builder.Connect(source.GetOutputPort("action"), waypoint_ik.GetInputPort("action"))
-    builder.Connect(waypoint_ik.GetOutputPort("actions_done"), source.GetInputPort("actions_done"))
     builder.Connect(plant.get_body_poses_output_port(), waypoint_ik.GetInputPort("body_poses"))
+    wires = [
+        (source.GetOutputPort("action"), waypoint_ik.GetInputPort("action")),
+        (waypoint_ik.GetOutputPort("actions_done"), source.GetInputPort("actions_done")),
+    ]
     if source.HasInputPort("body_poses"):
-        builder.Connect(plant.get_body_poses_output_port(), source.GetInputPort("body_poses"))
+        wires.append((plant.get_body_poses_output_port(), source.GetInputPort("body_poses")))
     if source.HasInputPort("hand_state"):
-        builder.Connect(plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state"))
+        wires.append((plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state")))
+    for out_port, in_port in wires:
+        try:
+            builder.Connect(out_port, in_port)
+        except RuntimeError as e:  # a user's source whose ports are not the protocol's
+            first = (str(e).strip().splitlines() or [""])[0]
+            raise PluginError(
+                f"action source {ref.action_source!r}: port {in_port.get_name()!r} or "
+                f"{out_port.get_name()!r} does not fit the protocol ({first})"
+            ) from None
     names = tuple(str(a) for a in actions)
     return ReferenceSource(waypoint_ik, names, waypoint_ik, source), solver
 

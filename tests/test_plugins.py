@@ -215,3 +215,47 @@ def test_plan_takes_a_plugin_planner_as_run_does(folder):
     assert r.stdout.splitlines()[0] == "(unstack a b)"
     r = run("--planner", "hostile:raises", cwd=folder, command="plan")
     one_line(r, 2, "planner 'hostile:raises' raised ZeroDivisionError", LINE["raises"])
+
+
+SOURCES = """
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from cake_drake.systems import PlanSource
+from cake_drake.systems.plan_source import ActionCommand
+
+
+class WrongType(LeafSystem):
+    def __init__(self):
+        super().__init__()
+        self.DeclareVectorInputPort("actions_done", 1)
+        self.DeclareAbstractOutputPort(
+            "action", lambda: AbstractValue.Make(3), lambda context, out: out.set_value(3)
+        )
+
+
+class Garbage(PlanSource):
+    def _calc_action(self, context, output):
+        output.set_value(ActionCommand(0, "(unstack a b)"))
+
+
+def wrong_type(context):
+    return WrongType()
+
+
+def garbage(context):
+    source = Garbage(context.actions)
+    return source
+"""
+
+
+def test_an_action_source_whose_action_is_not_a_command_is_exit_3(folder):
+    (folder / "sources.py").write_text(SOURCES)
+    r = run("--action-source", "sources:wrong_type", "--out", "o", "--quiet", cwd=folder)
+    one_line(r, 3, "the action source gave 3; it gives an ActionCommand")
+
+
+def test_an_action_source_giving_garbage_is_one_line_and_exit_3(folder):
+    (folder / "sources.py").write_text(SOURCES)
+    r = run("--action-source", "sources:garbage", "--out", "o", "--quiet", cwd=folder)
+    one_line(r, 3, "the action source gave ActionCommand(index=0, action='(unstack a b)')")

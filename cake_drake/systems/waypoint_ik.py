@@ -187,6 +187,16 @@ class WaypointIk(LeafSystem):
                 return replace(prog, working=-1, done=prog.done + 1)
             return prog
         cmd: ActionCommand = self._action_port.Eval(context)
+        if not (
+            isinstance(cmd, ActionCommand)
+            and isinstance(cmd.index, int)
+            and (cmd.action is None or isinstance(cmd.action, GroundAction))
+        ):
+            return replace(
+                prog,
+                error=f"the action source gave {cmd!r:.80}; it gives an ActionCommand(index: "
+                "int, action: GroundAction or None)",
+            )
         if cmd.action is None or cmd.index != prog.done:
             return prog
         traj = prog.trajectory.copy()
