@@ -19,7 +19,7 @@ from pydrake.systems.analysis import Simulator
 
 from cake_drake.diagram import CakeDiagram
 from cake_drake.errors import CakeDrakeError
-from cake_drake.plugins import is_plugin, raised_in_simulation
+from cake_drake.plugins import budget, is_plugin, raised_in_simulation
 from cake_drake.world.facts import Reading, read_facts, stack_offsets
 from cake_drake.world.faults import move_cube
 from cake_drake.world.scene import cube_poses
@@ -153,16 +153,18 @@ def execute(
     simulator = Simulator(cake.diagram)
     context = simulator.get_mutable_context()
     specs = plugin_specs(cake.scenario)
+    step_budget = cake.scenario.simulation.step_budget_s
 
     def advance(to: float | None = None) -> None:
         """Simulate to ``to`` (initialize when None); what a plug-in raises inside Drake's
         callbacks comes out as one line naming it (exit 3)."""
         try:
-            simulator.Initialize() if to is None else simulator.AdvanceTo(to)
+            with budget(step_budget if specs else None):
+                simulator.Initialize() if to is None else simulator.AdvanceTo(to)
         except (KeyboardInterrupt, CakeDrakeError):
             raise
-        except (Exception, SystemExit) as e:
-            failed = raised_in_simulation(e, specs)
+        except BaseException as e:  # an exception, SystemExit, or the budget's end
+            failed = raised_in_simulation(e, specs, step_budget)
             if failed is None:
                 raise
             raise failed from None

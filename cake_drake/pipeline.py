@@ -126,6 +126,7 @@ def _check_numbers(s: Scenario) -> None:
         )
     _range(sim.settle_s, 0.0, 60.0, "simulation.settle_s", " s")
     _range(sim.max_sim_s, 1.0, 3600.0, "simulation.max_sim_s", " s")
+    _range(sim.step_budget_s, 0.1, 3600.0, "simulation.step_budget_s", " s")
     if s.task.time_limit is not None:
         _range(s.task.time_limit, 1e-3, 86400.0, "task.time_limit", " s")
     g = s.task.generate

@@ -183,29 +183,13 @@ def guarded(
     endless recursion) or a budget it overruns becomes one :class:`PluginError` line naming
     ``label`` and the user's file:line. Ctrl-C stays an interrupt. The budget (wall clock)
     is kept in the main thread, and only where no outer budget is running."""
-    timed = (
-        budget_s is not None
-        and threading.current_thread() is threading.main_thread()
-        and signal.getitimer(signal.ITIMER_REAL)[0] == 0
-    )
-    previous = None
-    if timed:
-
-        def overrun(signum, frame):
-            raise _Overrun()
-
-        previous = signal.signal(signal.SIGALRM, overrun)
-        signal.setitimer(signal.ITIMER_REAL, max(budget_s, 1e-3))
     try:
-        return fn(*args, **kwargs)
+        with budget(None if budget_s is None else max(budget_s, 1e-3)):
+            return fn(*args, **kwargs)
     except (KeyboardInterrupt, CakeDrakeError):
         raise
     except (Exception, SystemExit, _Overrun) as e:  # noqa: BLE001 - user code
         raise failure(e, label, exit_code, budget_s) from None
-    finally:
-        if timed:
-            signal.setitimer(signal.ITIMER_REAL, 0)
-            signal.signal(signal.SIGALRM, previous)
 
 
 def guard_factory(
@@ -230,12 +214,16 @@ def guard_factory(
     return call
 
 
-def raised_in_simulation(e: BaseException, specs: Mapping[str, str]) -> PluginError | None:
+def raised_in_simulation(
+    e: BaseException, specs: Mapping[str, str], budget_s: float | None = None
+) -> PluginError | None:
     """A :class:`PluginError` (exit 3) when ``e``, out of a simulation, came from a plug-in's
     code; ``specs`` maps each plug-in's ``module:attribute`` to what it is. None when the
     exception did not come from user code."""
     where = user_frame(e.__traceback__)
     if where is None:
+        if isinstance(e, _Overrun):  # it ended outside the plug-ins' own code
+            return failure(e, "the simulation with " + ", ".join(specs), DURING, budget_s)
         return None
     filename = where.rsplit(":", 1)[0]
     label = "a plug-in"
@@ -245,4 +233,35 @@ def raised_in_simulation(e: BaseException, specs: Mapping[str, str]) -> PluginEr
         if file and Path(file).resolve() == Path(filename).resolve():
             label = f"{what} {spec!r}"
             break
-    return failure(e, label, DURING)
+    return failure(e, label, DURING, budget_s)
+
+
+class budget:
+    """A wall-clock budget around a block that runs plug-ins inside Drake's callbacks
+    (``with budget(30): simulator.AdvanceTo(t)``): at its end :class:`_Overrun` is raised
+    in whatever Python runs then. Main thread only; none when ``seconds`` is None or an
+    outer budget is running."""
+
+    def __init__(self, seconds: float | None) -> None:
+        self.seconds = seconds
+        self.timed = False
+
+    def __enter__(self) -> budget:
+        self.timed = (
+            self.seconds is not None
+            and threading.current_thread() is threading.main_thread()
+            and signal.getitimer(signal.ITIMER_REAL)[0] == 0
+        )
+        if self.timed:
+
+            def overrun(signum, frame):
+                raise _Overrun()
+
+            self.previous = signal.signal(signal.SIGALRM, overrun)
+            signal.setitimer(signal.ITIMER_REAL, self.seconds)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.timed:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, self.previous)

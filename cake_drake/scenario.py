@@ -123,6 +123,9 @@ class Simulation:
 
     settle_s: float = 0.3  # after the last action, before the poses are read
     max_sim_s: float = 300.0  # simulated-time budget
+    #: Wall-clock budget (s) of each 0.05 s of simulated time while plug-ins run inside
+    #: the simulation (an action source, a controller): one that hangs ends the run (exit 3).
+    step_budget_s: float = 60.0
 
 
 @dataclass

@@ -239,6 +239,17 @@ class Garbage(PlanSource):
         output.set_value(ActionCommand(0, "(unstack a b)"))
 
 
+class Sleeps(PlanSource):
+    def _calc_action(self, context, output):
+        import time
+
+        time.sleep(600)
+
+
+def sleeps(context):
+    return Sleeps(context.actions)
+
+
 def wrong_type(context):
     return WrongType()
 
@@ -259,3 +270,12 @@ def test_an_action_source_giving_garbage_is_one_line_and_exit_3(folder):
     (folder / "sources.py").write_text(SOURCES)
     r = run("--action-source", "sources:garbage", "--out", "o", "--quiet", cwd=folder)
     one_line(r, 3, "the action source gave ActionCommand(index=0, action='(unstack a b)')")
+
+
+def test_an_action_source_that_hangs_inside_the_simulation_ends_at_its_budget(folder):
+    (folder / "sources.py").write_text(SOURCES)
+    (folder / "s.yaml").write_text(
+        "reference: {action_source: sources:sleeps}\nsimulation: {step_budget_s: 1}\n"
+    )
+    r = run("--scenario", "s.yaml", "--out", "o", "--quiet", cwd=folder)
+    one_line(r, 3, "action source 'sources:sleeps' overran its budget of 1 s", "sources.py:")
