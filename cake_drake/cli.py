@@ -150,6 +150,12 @@ def run_parser() -> argparse.ArgumentParser:
         "--meshcat", action="store_true", help="visualization.meshcat: watch, save replay.html"
     )
     g.add_argument("--no-render", action="store_true", help="outputs.render: false")
+    g.add_argument(
+        "--cameras",
+        action="store_true",
+        help="cameras: the default scene and wrist cameras (224 x 224), when the scenario has "
+        "none; each camera's last frame is written as camera_<name>.png",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -240,6 +246,10 @@ def scenario_from_args(args: argparse.Namespace):
         s.seed = args.seed
     if args.meshcat:
         s.visualization.meshcat = True
+    if args.cameras and not s.cameras:
+        from cake_drake.world.cameras import default_cameras
+
+        s.cameras = default_cameras()
     return s
 
 

@@ -38,6 +38,7 @@ from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
 from cake_drake.systems import SourceContext, make_action_source
 from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
+from cake_drake.world.cameras import add_cameras
 from cake_drake.world.faults import Knock, Pusher, Slip, SlipFingers
 from cake_drake.world.scene import Q_HOME, X_HAND_GRASP, Scene, add_world, make_control_plant
 
@@ -106,6 +107,7 @@ class CakeDiagram:
     controller: Controller
     loggers: dict[str, VectorLogSink] = field(default_factory=dict)
     ik: TimedSolver | None = None
+    cameras: dict = field(default_factory=dict)  # name -> RgbdSensor (cake_drake.world.cameras)
 
 
 def _default_planner():
@@ -268,6 +270,7 @@ def build_diagram(
         loggers[name] = LogVectorOutput(reference.port(name), builder, dt)
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
+    cameras = add_cameras(builder, scene, scenario.cameras) if scenario.cameras else {}
     if meshcat is not None:
         from cake_drake.outputs.replay import add_visualization
 
@@ -276,4 +279,4 @@ def build_diagram(
     diagram.set_name("cake_drake")
     if reference.waypoint_ik is not None and reference.waypoint_ik.checker is not None:
         reference.waypoint_ik.checker.bind(diagram)
-    return CakeDiagram(diagram, scene, scenario, reference, controller, loggers, solver)
+    return CakeDiagram(diagram, scene, scenario, reference, controller, loggers, solver, cameras)

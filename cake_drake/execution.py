@@ -20,6 +20,7 @@ from pydrake.systems.analysis import Simulator
 from cake_drake.diagram import CakeDiagram
 from cake_drake.errors import CakeDrakeError
 from cake_drake.plugins import budget, is_plugin, raised_in_simulation
+from cake_drake.world.cameras import grab
 from cake_drake.world.facts import Reading, read_facts, stack_offsets
 from cake_drake.world.faults import move_cube
 from cake_drake.world.scene import cube_poses
@@ -69,6 +70,7 @@ class Execution:
     fingers_final: float  # opening of one finger at the end (m)
     actions: tuple[str, ...] = ()  # the actions executed, in order
     monitoring: dict = field(default_factory=dict)  # the monitor's events, replans, checks
+    frames: dict = field(default_factory=dict)  # each camera's last image (name -> array)
 
     @property
     def rtf(self) -> float:
@@ -214,4 +216,5 @@ def execute(
         fingers_final=fingers,
         actions=cake.reference.executed(context),
         monitoring=cake.reference.monitoring(context),
+        frames=grab(cake.cameras, cake.scenario.cameras, context) if cake.cameras else {},
     )

@@ -44,6 +44,7 @@ from cake_drake.symbolic import (
     validate_plan,
 )
 from cake_drake.symbolic.roles import blocksworld_view
+from cake_drake.world.cameras import check_cameras
 from cake_drake.world.faults import Move, RandomFault, Slip, check_faults, resolve_random
 from cake_drake.world.scene import layout
 
@@ -194,6 +195,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
 
     s = scenario
     _check_numbers(s)
+    check_cameras(s.cameras)
     getattr(s.controller, "check", lambda: None)()
     make_controller(s.controller)
     task = s.task
@@ -262,6 +264,7 @@ def run_outputs(s: Scenario, generated: str | None) -> set[str]:
         names.add("problem.pddl")
     if s.visualization.meshcat:
         names.add("replay.html")
+    names |= {f"camera_{c.name}.png" for c in s.cameras}
     return names
 
 

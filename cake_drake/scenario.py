@@ -44,6 +44,7 @@ from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
 from cake_drake.symbolic import DEFAULT_PLANNER
 from cake_drake.symbolic.sexpr import read_text
+from cake_drake.world.cameras import Camera
 from cake_drake.world.faults import FaultConfig, Knock, Move, RandomFault, Slip
 from cake_drake.world.scene import WorldConfig
 
@@ -153,6 +154,8 @@ class Scenario:
     visualization: Visualization = field(default_factory=Visualization)
     #: Disturbances of the world (cake_drake.world.faults): !Slip, !Knock, !Move, !RandomFault.
     faults: list[FaultConfig] = field(default_factory=list)
+    #: Cameras in the world (cake_drake.world.cameras); none by default (no renderer then).
+    cameras: list[Camera] = field(default_factory=list)
     seed: int = 0  # IK restarts draw from it; the same seed gives the same run
 
 

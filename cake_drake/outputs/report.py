@@ -155,6 +155,12 @@ def write_outputs(
         save_npz(out.path("trajectory.npz"), samples, actions)
     except (OSError, InputError) as e:
         raise OutputError(f"{out.out}: cannot write the outputs ({e})") from None
+    for name, image in execution.frames.items():
+        from cake_drake.world.render import save_png
+
+        if image.ndim == 3:  # a colour image (depth images are left to the caller)
+            rgba = np.dstack([image, np.full(image.shape[:2], 255, np.uint8)])
+            save_png(rgba, out.path(f"camera_{name}.png"))
     if meshcat is not None:
         try:
             write_replay(meshcat, out.path("replay.html"))

@@ -1,0 +1,173 @@
+"""Cameras in the simulated world: Drake ``RgbdSensor``s on the headless VTK renderer.
+
+A scenario's ``cameras:`` list declares them; a run without cameras builds no renderer
+and pays nothing. A camera is fixed in the world (``attached_to: world``) or rides on a
+body of the robot (``attached_to: panda_hand``), at ``xyz`` in that frame, looking at
+``target`` (in the same frame) or turned by ``rpy_deg``. Drake's camera frame looks
+along +z, with +x to the right of the image and +y down.
+
+Images are evaluated when asked for (a policy's step, a recording's frame): ``rate_hz``
+is how often a policy or a recording samples the camera, not a rate the simulation
+renders at. VTK renders through EGL on Mesa's software rasteriser: no display and no GPU
+(Debian: libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1).
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.geometry import (
+    ClippingRange,
+    ColorRenderCamera,
+    DepthRange,
+    DepthRenderCamera,
+    MakeRenderEngineVtk,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+)
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.sensors import CameraInfo, RgbdSensor
+
+from cake_drake.errors import InputError
+
+RENDERER = "vtk"
+#: What a camera can ride on.
+ATTACHMENTS = ("world", "panda_hand")
+
+
+@dataclass
+class Camera:
+    """One camera (see the module's docstring for frames and conventions)."""
+
+    name: str = "scene"
+    attached_to: str = "world"  # world | panda_hand
+    xyz: list[float] = field(default_factory=lambda: [1.35, 0.0, 1.0])  # m, in that frame
+    #: A point to look at, in the same frame (empty: use rpy_deg).
+    target: list[float] = field(default_factory=lambda: [0.3, 0.0, 0.0])
+    rpy_deg: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    width: int = 224
+    height: int = 224
+    fov_y_deg: float = 60.0  # vertical field of view
+    rate_hz: float = 10.0  # how often a policy or a recording samples it
+    depth: bool = False  # also a depth image (m)
+
+
+def default_cameras() -> list[Camera]:
+    """A scene camera that frames the whole table, and a wrist camera on the hand that sees
+    what the fingers are about to close on: 224 x 224 RGB at 10 Hz (OpenVLA's input)."""
+    return [
+        Camera(),
+        Camera(
+            name="wrist",
+            attached_to="panda_hand",
+            xyz=[0.09, 0.0, 0.02],  # behind the fingers, off the flange
+            target=[0.0, 0.0, 0.2],  # 10 cm past the grasp point: a cube at pre-grasp
+            fov_y_deg=70.0,
+        ),
+    ]
+
+
+def look_at(eye: Sequence[float], target: Sequence[float], up=(0.0, 0.0, 1.0)) -> RigidTransform:
+    """Camera pose (Drake camera frame: +z forward, +x right, +y down) at ``eye`` looking
+    at ``target``, with ``up`` towards the top of the image."""
+    eye, target = np.asarray(eye, float), np.asarray(target, float)
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, np.asarray(up, float))
+    if np.linalg.norm(x) < 1e-9:  # looking along up: any right-hand side will do
+        x = np.cross(z, [1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), eye)
+
+
+def camera_pose(camera: Camera) -> RigidTransform:
+    """``X_PC``: the camera in the frame it is attached to."""
+    if camera.target:
+        # On the hand, +x of the hand frame is "up" in the image (the hand points down).
+        up = (0.0, 0.0, 1.0) if camera.attached_to == "world" else (-1.0, 0.0, 0.0)
+        return look_at(camera.xyz, camera.target, up)
+    return RigidTransform(RollPitchYaw(np.radians(camera.rpy_deg)), camera.xyz)
+
+
+def check_cameras(cameras: Sequence[Camera]) -> None:
+    """Refuse cameras that cannot work, before anything is built (one line, exit 2)."""
+    names = [c.name for c in cameras]
+    for c in cameras:
+        where = f"cameras[{names.index(c.name)}] ({c.name})"
+        if not c.name or not c.name.replace("_", "").isalnum():
+            raise InputError(f"{where}: a camera's name is letters, digits and _")
+        if names.count(c.name) > 1:
+            raise InputError(f"{where}: two cameras named {c.name!r}")
+        if c.attached_to not in ATTACHMENTS:
+            raise InputError(
+                f"{where}: attached_to {c.attached_to!r}; choose one of: {', '.join(ATTACHMENTS)}"
+            )
+        if not (16 <= c.width <= 4096 and 16 <= c.height <= 4096):
+            raise InputError(f"{where}: {c.width} x {c.height} pixels; each side 16 to 4096")
+        if not 5.0 <= c.fov_y_deg <= 170.0:
+            raise InputError(f"{where}: fov_y_deg {c.fov_y_deg:g}; 5 to 170 degrees")
+        if not 0.1 <= c.rate_hz <= 100.0:
+            raise InputError(f"{where}: rate_hz {c.rate_hz:g}; 0.1 to 100 Hz")
+        if len(c.xyz) != 3 or (c.target and len(c.target) != 3) or len(c.rpy_deg) != 3:
+            raise InputError(f"{where}: xyz, target and rpy_deg are three numbers each")
+        if c.target and np.linalg.norm(np.subtract(c.target, c.xyz)) < 1e-6:
+            raise InputError(f"{where}: the camera stands at its own target")
+
+
+def add_cameras(builder: DiagramBuilder, scene, cameras: Sequence[Camera]) -> dict:
+    """Add the VTK renderer and one ``RgbdSensor`` per camera; returns name -> sensor."""
+    if not cameras:
+        return {}
+    sg, plant = scene.scene_graph, scene.plant
+    if not sg.HasRenderer(RENDERER):
+        try:
+            sg.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
+        except RuntimeError as e:
+            raise InputError(
+                f"cameras: the headless renderer could not start ({str(e).splitlines()[0]}); "
+                "install its libraries: apt-get install libegl1 libegl-mesa0 "
+                "libgl1-mesa-dri libgbm1"
+            ) from None
+    sensors = {}
+    for c in cameras:
+        if c.attached_to == "world":
+            parent = sg.world_frame_id()
+        else:
+            parent = plant.GetBodyFrameIdOrThrow(
+                plant.GetBodyByName(c.attached_to, scene.hand).index()
+            )
+        core = RenderCameraCore(
+            RENDERER,
+            CameraInfo(c.width, c.height, np.radians(c.fov_y_deg)),
+            ClippingRange(0.01, 5.0),
+            RigidTransform(),
+        )
+        sensor = builder.AddNamedSystem(
+            f"camera_{c.name}",
+            RgbdSensor(
+                parent,
+                camera_pose(c),
+                ColorRenderCamera(core, False),
+                DepthRenderCamera(core, DepthRange(0.02, 4.9)),
+            ),
+        )
+        builder.Connect(sg.get_query_output_port(), sensor.query_object_input_port())
+        sensors[c.name] = sensor
+    return sensors
+
+
+def grab(sensors: dict, cameras: Sequence[Camera], root_context) -> dict[str, np.ndarray]:
+    """Every camera's image now: ``name`` -> RGB (H x W x 3, uint8), and ``name.depth`` ->
+    depth (H x W, float32 m) for a camera with ``depth``."""
+    images = {}
+    for c in cameras:
+        sensor = sensors[c.name]
+        context = sensor.GetMyContextFromRoot(root_context)
+        rgba = sensor.color_image_output_port().Eval(context).data
+        images[c.name] = np.array(rgba[:, :, :3], copy=True)
+        if c.depth:
+            depth = sensor.depth_image_32F_output_port().Eval(context).data
+            images[f"{c.name}.depth"] = np.array(depth[:, :, 0], copy=True)
+    return images
