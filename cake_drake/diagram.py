@@ -33,10 +33,11 @@ from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import TimedSolver
 from cake_drake.plugins import PluginError, is_plugin
-from cake_drake.scenario import Recorded, Scenario, resolve_path
+from cake_drake.scenario import Policy, Recorded, Scenario, resolve_path
 from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
 from cake_drake.systems import SourceContext, make_action_source
+from cake_drake.systems.policy_source import PolicySource
 from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
 from cake_drake.world.cameras import add_cameras
 from cake_drake.world.faults import Knock, Pusher, Slip, SlipFingers
@@ -55,6 +56,7 @@ class ReferenceSource:
     waypoint_ik: WaypointIk | None = None  # planned: the geometric layer
     action_source: System | None = None  # planned: where the actions come from
     replay: ReferenceTrajectory | None = None  # recorded: what is replayed
+    policy: PolicySource | None = None  # a policy: the learned layer's slot
 
     def port(self, name: str):
         return self.system.GetOutputPort(name)
@@ -79,6 +81,8 @@ class ReferenceSource:
         """(actions done, finished, the error that stopped execution or None, collision
         warnings). Planned: finished when the action source has no next action and the
         arm is idle; recorded: when every recorded action has run."""
+        if self.policy is not None:
+            return self.policy.steps, self.policy.finished(), None, ()
         if self.waypoint_ik is not None:
             prog = self.waypoint_ik.progress(self.waypoint_ik.GetMyContextFromRoot(root_context))
             source_context = self.action_source.GetMyContextFromRoot(root_context)
@@ -125,9 +129,13 @@ def _add_reference(
     q_start: np.ndarray,
     planner,
     slots: tuple[tuple[float, float], ...],
+    cameras: dict,
+    policy=None,
 ) -> tuple[ReferenceSource, TimedSolver | None]:
-    """The one place that tells a planned reference from a recorded one."""
+    """The one place that tells a planned reference, a recorded one and a policy apart."""
     ref = scenario.reference
+    if isinstance(ref, Policy):
+        return _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, policy)
     if isinstance(ref, Recorded):
         replay = ReferenceTrajectory.from_npz(resolve_path(ref.path), ref.differentiate)
         system = builder.AddNamedSystem("reference", replay.make_source())
@@ -143,12 +151,7 @@ def _add_reference(
     motion = scenario.motion
     # Checks in the simulation's own world (bound once the Diagram is built).
     checker = CollisionChecker(list(scene.cubes), scene=scene) if motion.collision_check else None
-    indices = WorldIndices(
-        cube_bodies={n: int(scene.cube_body(n).index()) for n in scene.cubes},
-        hand_body=int(plant.GetBodyByName("panda_hand", scene.hand).index()),
-        X_hand_grasp=X_HAND_GRASP,
-        slots=slots,
-    )
+    indices = _world_indices(scene, slots)
     context = SourceContext(
         tuple(actions), problem, indices, planner, scenario.world.time_step, ref.max_replans
     )
@@ -194,6 +197,66 @@ def _add_reference(
     return ReferenceSource(waypoint_ik, names, waypoint_ik, source), solver
 
 
+def _world_indices(scene: Scene, slots) -> WorldIndices:
+    plant = scene.plant
+    return WorldIndices(
+        cube_bodies={n: int(scene.cube_body(n).index()) for n in scene.cubes},
+        hand_body=int(plant.GetBodyByName("panda_hand", scene.hand).index()),
+        X_hand_grasp=X_HAND_GRASP,
+        slots=slots,
+    )
+
+
+def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, policy):
+    """A policy in place of the action source and WaypointIk (the learned layer's slot)."""
+    from cake_drake.geometric.ik import DrakeIk
+    from cake_drake.plugins import guarded
+    from cake_drake.policy.observations import goal_facts, instruction
+    from cake_drake.systems.policy_source import PolicyTask, make_policy
+
+    ref = scenario.reference
+    view = blocksworld_view(problem)
+    task = PolicyTask(
+        instruction(view.goal),
+        goal_facts(view.goal),
+        tuple(view.blocks),
+        problem,
+        scenario,
+        ref.action_space,
+        ref.rate_hz,
+        dict(ref.options),
+    )
+    kinematics = Kinematics(scene.control_plant)
+    label = f"policy {ref.factory!r}" if ref.factory else "the policy"
+    if policy is None:
+        policy = make_policy(ref.factory, ref.options)
+        guarded(label, policy.reset, task, scenario.seed)
+    source = builder.AddNamedSystem(
+        "policy",
+        PolicySource(
+            policy,
+            label,
+            ref.action_space,
+            ref.options,
+            ref.rate_hz,
+            ref.max_steps,
+            _world_indices(scene, slots),
+            DrakeIk(kinematics, scenario.seed),
+            (kinematics.lower, kinematics.upper),
+            q_start,
+            list(cameras),
+            task,
+        ),
+    )
+    plant = scene.plant
+    builder.Connect(plant.get_state_output_port(scene.arm), source.GetInputPort("arm_state"))
+    builder.Connect(plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state"))
+    builder.Connect(plant.get_body_poses_output_port(), source.GetInputPort("body_poses"))
+    for name, sensor in cameras.items():
+        builder.Connect(sensor.color_image_output_port(), source.GetInputPort(f"image_{name}"))
+    return ReferenceSource(source, (), policy=source), None
+
+
 def build_diagram(
     scenario: Scenario,
     problem: Problem,
@@ -204,6 +267,7 @@ def build_diagram(
     planner=None,
     faults=(),
     slots: Sequence[tuple[float, float]] | None = None,
+    policy=None,
 ) -> CakeDiagram:
     """Wire the action source, geometry and controller around the simulated Panda, for
     ``problem``'s blocks starting at ``initial_poses`` and the planned ``actions``.
@@ -227,6 +291,7 @@ def build_diagram(
     plant.SetDefaultPositions(scene.hand, [0.04, 0.04])
 
     slots = tuple(scenario.world.slots if slots is None else slots)
+    cameras = add_cameras(builder, scene, scenario.cameras) if scenario.cameras else {}
     reference, solver = _add_reference(
         builder,
         scenario,
@@ -236,6 +301,8 @@ def build_diagram(
         q_start,
         planner or _default_planner(),
         slots,
+        cameras,
+        policy,
     )
     finger_command = reference.port("finger_state")
     slips = [f.action for f in faults if isinstance(f, Slip)]
@@ -270,7 +337,6 @@ def build_diagram(
         loggers[name] = LogVectorOutput(reference.port(name), builder, dt)
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
-    cameras = add_cameras(builder, scene, scenario.cameras) if scenario.cameras else {}
     if meshcat is not None:
         from cake_drake.outputs.replay import add_visualization
 

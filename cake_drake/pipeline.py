@@ -23,7 +23,14 @@ from cake_drake.errors import InputError, NoPlanError
 from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
 from cake_drake.plugins import PluginError, is_plugin, resolve
-from cake_drake.scenario import Generate, Recorded, Scenario, portable_path, resolve_path
+from cake_drake.scenario import (
+    Generate,
+    Policy,
+    Recorded,
+    Scenario,
+    portable_path,
+    resolve_path,
+)
 from cake_drake.symbolic import (
     DEFAULT_PLANNER,
     NAMINGS,
@@ -239,6 +246,8 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
                 f"{s.reference.path}: the recording lasts {replay.end_time:g} s, more than "
                 f"simulation.max_sim_s = {s.simulation.max_sim_s:g} s"
             )
+    elif isinstance(s.reference, Policy):
+        check_policy(s.reference)
     else:
         resolve(s.reference.action_source, ACTION_SOURCES, "action source")
         resolve(s.motion.ik, SOLVERS, "IK solver")
@@ -248,6 +257,27 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     if out is not None:
         check_output_folder(out, "run", run_outputs(s, generated), run_inputs(s))
     return Checked(s, problem, planner, out, generated)
+
+
+def check_policy(ref: Policy) -> None:
+    """A ``!Policy`` reference that can run: a factory that imports, a known action space,
+    a rate and a step budget in range (the policy itself is built with the Diagram)."""
+    from cake_drake.policy.spaces import check_space
+
+    if not ref.factory:
+        raise InputError(
+            "reference: !Policy needs a factory (module:attribute, "
+            "e.g. examples.expert_policy:make)"
+        )
+    if not is_plugin(ref.factory):
+        raise InputError(
+            f"reference.factory {ref.factory!r}: a policy is module:attribute of your own "
+            "(e.g. examples.expert_policy:make)"
+        )
+    resolve(ref.factory, {}, "policy")
+    check_space(ref.action_space, ref.options)
+    _range(ref.rate_hz, 0.5, 100.0, "reference.rate_hz", " Hz")
+    _range(ref.max_steps, 1, 1_000_000, "reference.max_steps")
 
 
 #: Every file a run may write to its output folder.
@@ -440,6 +470,8 @@ def run(
 
         worker = OutputWorker(blocks, initial, render=scenario.outputs.render)
     try:
+        # A policy decides what to do; the plan still lays out the table as for the classical
+        # run of the same task (and is recorded for comparison).
         plan = get_plan(checked)
         needed = check_table_room(problem, plan.actions, len(scenario.world.slots))
         # As many slots as the plan needs, as far apart as the arc allows.

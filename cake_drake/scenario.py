@@ -115,7 +115,23 @@ class Recorded:
     differentiate: str = "spline"  # how q-dot and q-double-dot are recovered: spline | central
 
 
-ReferenceConfig = Planned | Recorded
+@dataclass
+class Policy:
+    """A policy drives the arm (the learned layer's slot): ``factory`` (``module:attribute``)
+    called as ``factory(**options)`` returns an object with ``reset(task, seed)`` and
+    ``act(observation) -> action`` (or ``(action, done)``), asked ``rate_hz`` times a
+    simulated second; its action, in ``action_space`` (:mod:`cake_drake.policy.spaces`),
+    is held until the next step. The run ends when the policy says done, or after
+    ``max_steps`` steps; the verdict is measured from the poses, as for any run."""
+
+    factory: str = ""
+    action_space: str = "joint_position"  # joint_position | ee_delta | joint_chunk
+    rate_hz: float = 10.0
+    max_steps: int = 1000
+    options: dict[str, float] = field(default_factory=dict)
+
+
+ReferenceConfig = Planned | Recorded | Policy
 
 
 @dataclass
@@ -504,6 +520,7 @@ __all__ = [
     "Motion",
     "Outputs",
     "Planned",
+    "Policy",
     "Recorded",
     "Scenario",
     "Simulation",

@@ -1,0 +1,208 @@
+"""``PolicySource``: a policy in the Diagram, in place of the action source and WaypointIk.
+
+.. pydrake_system::
+
+    name: PolicySource
+    input_ports:
+    - arm_state
+    - hand_state
+    - body_poses
+    - image_<camera> (one per camera)
+    output_ports:
+    - desired_state
+    - desired_acceleration
+    - finger_state
+    - actions_done
+    - labels
+
+Every ``1 / rate_hz`` simulated seconds its one update builds the observation
+(:mod:`cake_drake.policy.observations`) from the measured state and the cameras, asks the
+policy for an action (guarded: what the policy raises, returns wrongly or overruns is one
+line naming it), turns it into 7 joint targets and a gripper width
+(:mod:`cake_drake.policy.spaces`) and holds them until the next update. The outputs are
+the same named reference ports ``WaypointIk`` has, so the controller, the plant, the
+loggers and the verdict are unchanged. The policy object is Python state outside the
+Context: one Diagram, one policy.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import LeafSystem
+from pydrake.systems.sensors import ImageRgba8U
+
+from cake_drake.plugins import DURING, PluginError, guarded
+from cake_drake.policy import spaces
+from cake_drake.policy.observations import pose7
+from cake_drake.systems.waypoint_ik import REFERENCE_PORTS, WorldIndices
+
+#: Wall-clock budget (s) of one call to a policy's ``act``.
+ACT_BUDGET_S = 30.0
+
+
+@dataclass
+class PolicyTask:
+    """What a policy is told at reset: the goal in words and facts, the cubes."""
+
+    instruction: str
+    goal: tuple[str, ...]
+    cubes: tuple[str, ...]
+    problem: object = None  # the symbolic Problem (for a policy that plans)
+    scenario: object = None  # the run's Scenario (for a policy that simulates ahead)
+    action_space: str = "joint_position"  # what the policy is to answer in
+    rate_hz: float = 10.0
+    options: dict | None = None
+
+
+class PolicySource(LeafSystem):
+    """See the module's docstring."""
+
+    def __init__(
+        self,
+        policy,
+        label: str,
+        space: str,
+        options: dict,
+        rate_hz: float,
+        max_steps: int,
+        world: WorldIndices,
+        ik,
+        limits: tuple[np.ndarray, np.ndarray],
+        q_start: np.ndarray,
+        cameras: Sequence[str],
+        task: PolicyTask,
+    ) -> None:
+        super().__init__()
+        self.policy, self.label, self.space, self.options = policy, label, space, dict(options)
+        self.max_steps, self.world, self.ik, self.limits = max_steps, world, ik, limits
+        self.task = task
+        self.counts = spaces.Counts()
+        self.done = False
+        self.steps = 0
+        self.last_action: np.ndarray | None = None
+        self._chunk: deque = deque()
+        self._q = np.asarray(q_start, float).copy()
+        self._width = spaces.GRIPPER_MAX
+        self._arm = self.DeclareVectorInputPort("arm_state", 14)
+        self._hand = self.DeclareVectorInputPort("hand_state", 4)
+        self._poses = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()])
+        )
+        self._images = {
+            name: self.DeclareAbstractInputPort(f"image_{name}", AbstractValue.Make(ImageRgba8U()))
+            for name in cameras
+        }
+        initial = {
+            "desired_state": np.r_[self._q, np.zeros(7)],
+            "desired_acceleration": np.zeros(7),
+            "finger_state": np.array([0.04, 0.04, 0.0, 0.0]),
+            "actions_done": np.zeros(1),
+            "labels": np.array([0.0, -1.0]),
+        }
+        self._groups = {}
+        for name, size in REFERENCE_PORTS.items():
+            assert initial[name].shape == (size,)
+            self._groups[name] = self.DeclareDiscreteState(initial[name])
+            self.DeclareStateOutputPort(name, self._groups[name])
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
+
+    # --- what the policy sees -------------------------------------------------------
+
+    def observe(self, context) -> dict:
+        """The observation now (see :mod:`cake_drake.policy.observations`)."""
+        arm = self._arm.Eval(context)
+        hand = self._hand.Eval(context)
+        poses = self._poses.Eval(context)
+        X_WG = poses[self.world.hand_body].multiply(self.world.X_hand_grasp)
+        cubes = self.task.cubes
+        obs = {
+            "observation.state": np.r_[arm[:7], hand[0] + hand[1]].astype(np.float32),
+            "observation.velocity": np.asarray(arm[7:], np.float32),
+            "observation.ee_pose": pose7(X_WG),
+            "observation.cubes": np.array(
+                [pose7(poses[self.world.cube_bodies[c]]) for c in cubes], np.float32
+            ).reshape(len(cubes), 7),
+            "cubes": cubes,
+            "task": self.task.instruction,
+            "goal": self.task.goal,
+            "time": float(context.get_time()),
+            "step": self.steps,
+        }
+        for name, port in self._images.items():
+            obs[f"observation.images.{name}"] = np.array(port.Eval(context).data[:, :, :3])
+        return obs
+
+    # --- one step -----------------------------------------------------------------------
+
+    def _update(self, context, state) -> None:
+        if self.done:
+            return
+        if self.steps >= self.max_steps:
+            self.done = True
+            return
+        if not self._chunk:
+            obs = self.observe(context)
+            answer = guarded(
+                self.label, self.policy.act, obs, exit_code=DURING, budget_s=ACT_BUDGET_S
+            )
+            action, said_done = answer if isinstance(answer, tuple) else (answer, False)
+            if said_done and action is None:
+                self.done = True
+                return
+            lower, upper = self.limits
+            a = spaces.checked(
+                action, self.space, self.options, self.label, lower, upper, self.counts
+            )
+            self.last_action = a
+            if self.space == "joint_chunk":
+                execute = int(self.options.get("execute", len(a)))
+                self._chunk.extend(a[:execute])
+            elif self.space == "ee_delta":
+                X_WG = self._poses.Eval(context)[self.world.hand_body].multiply(
+                    self.world.X_hand_grasp
+                )
+                q = spaces.ee_target(a[:6], X_WG, self.ik, self._q, self.counts)
+                if q is not None:
+                    self._q = q
+                self._width = float(a[6]) * spaces.GRIPPER_MAX
+            else:
+                self._q, self._width = a[:7].copy(), float(a[7])
+            if said_done:
+                self.done = True
+        if self._chunk:
+            row = self._chunk.popleft()
+            self._q, self._width = np.array(row[:7]), float(row[7])
+        self.steps += 1
+        self.counts.steps = self.steps
+        values = {
+            "desired_state": np.r_[self._q, np.zeros(7)],
+            "desired_acceleration": np.zeros(7),
+            "finger_state": np.array([self._width / 2, self._width / 2, 0.0, 0.0]),
+            "actions_done": np.array([float(self.steps)]),
+            "labels": np.array([0.0, float(self.steps - 1)]),
+        }
+        for name, index in self._groups.items():
+            state.get_mutable_discrete_state(index).set_value(values[name])
+
+    def finished(self) -> bool:
+        return self.done
+
+
+def make_policy(spec: str, options: dict):
+    """The policy ``spec`` (``module:attribute``) names, built with ``options``; checked for
+    the protocol (``reset``, ``act``)."""
+    from cake_drake.plugins import require, resolve
+
+    factory = resolve(spec, {}, "policy")
+    policy = factory(**{k: v for k, v in options.items() if k not in ("horizon", "execute")})
+    require(policy, spec, "policy", ("reset", "act"))
+    return policy
+
+
+__all__ = ["PolicySource", "PolicyTask", "make_policy", "PluginError"]
