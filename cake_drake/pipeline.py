@@ -378,6 +378,17 @@ def checked_plan(problem: Problem, actions: tuple[GroundAction, ...], label: str
     return Plan(tuple(actions), label, "-", "-", 0.0, False)
 
 
+def plan_and_layout(checked: Checked) -> tuple[Plan, tuple, dict]:
+    """The plan, the table slots it needs (as many as it needs, as far apart as the arc
+    allows) and the cubes' initial poses on them."""
+    plan = get_plan(checked)
+    scenario = checked.scenario
+    needed = check_table_room(checked.problem, plan.actions, len(scenario.world.slots))
+    slots = scenario.world.slots_for(needed)
+    initial = layout(towers(blocksworld_view(checked.problem).init), slots)
+    return plan, slots, initial
+
+
 def check_table_room(problem: Problem, actions: Sequence[GroundAction], slots: int) -> int:
     """How many table slots the plan needs at once; refused if more than ``slots``.
 
@@ -472,11 +483,7 @@ def run(
     try:
         # A policy decides what to do; the plan still lays out the table as for the classical
         # run of the same task (and is recorded for comparison).
-        plan = get_plan(checked)
-        needed = check_table_room(problem, plan.actions, len(scenario.world.slots))
-        # As many slots as the plan needs, as far apart as the arc allows.
-        slots = scenario.world.slots_for(needed)
-        initial = layout(stacks, slots)
+        plan, slots, initial = plan_and_layout(checked)
         stages["planning"] = time.perf_counter() - t
         if not quiet and checked.planner is not None:
             print(plan.note(), file=sys.stderr)

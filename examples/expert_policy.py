@@ -50,6 +50,8 @@ class ExpertPolicy:
         self.end = float(self.t[-1])
         self.space, self.rate = task.action_space, task.rate_hz
         self.horizon = int((task.options or {}).get("horizon", 10))
+        self.execute = int((task.options or {}).get("execute", self.horizon))
+        self.steps = 0
 
     def reference(self, t: float) -> tuple[np.ndarray, float]:
         """Joints and gripper width of the classical reference at ``t`` (held at its end)."""
@@ -57,7 +59,10 @@ class ExpertPolicy:
         return q, float(np.interp(t, self.t, self.width))
 
     def act(self, observation: dict):
-        step = observation["step"]
+        """``observation``: the policy slot's (``observation.ee_pose``) or the Gymnasium
+        environment's (``state``, whose last 7 numbers are the grasp frame's pose)."""
+        step = self.steps  # the env's steps so far (a chunk is `execute` of them)
+        self.steps += self.execute if self.space == "joint_chunk" else 1
         if self.space != "ee_delta":
             t = (step + 1) / self.rate  # where the reference is when this step's hold ends
             if t > self.end + 1.0 / self.rate:
@@ -69,7 +74,12 @@ class ExpertPolicy:
             return np.r_[q, width]
         # ee_delta: a step is a bounded move from where the hand is measured, so the
         # reference's clock waits while the hand is behind it (it catches up first).
-        pose = observation["observation.ee_pose"].astype(float)
+        pose = np.asarray(
+            observation["observation.ee_pose"]
+            if "state" not in observation
+            else observation["state"][-7:],
+            float,
+        )
         X_now = RigidTransform(RotationMatrix(_quaternion(pose[3:])), pose[:3])
         if step == 0:
             self.tau = 0.0
