@@ -1,0 +1,234 @@
+"""The learned layer's slot: a policy drives the same Diagram, and Gymnasium drives a policy.
+
+Everything runs for real: Drake, the renderer, gymnasium's own checker and vector env.
+The expert (the classical cake as a policy) must build the tower through every action
+space; the random policy must not.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+
+from cake_drake.errors import InputError
+from cake_drake.pipeline import check, run
+from cake_drake.scenario import Policy, Scenario, parse_scenario
+from cake_drake.symbolic import PROBLEM_5
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV_ID = "cake_drake.gym:CakeDrake/Stack-v0"
+sys.path.insert(0, str(ROOT))  # examples/
+
+
+def policy_scenario(space: str, factory: str = "examples.expert_policy:make", **options):
+    s = Scenario(reference=Policy(factory=factory, action_space=space, options=options))
+    s.outputs.render = False
+    return s
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "space, options",
+    [("joint_position", {}), ("ee_delta", {}), ("joint_chunk", {"horizon": 10, "execute": 5})],
+)
+def test_the_expert_builds_the_tower_in_every_action_space(space, options):
+    result = run(policy_scenario(space, **options), write=False)
+    assert result.success, result.message
+    source = result.cake.reference.policy
+    assert source.done and source.counts.unreachable == 0
+
+
+def test_the_random_policy_does_not_build_the_tower():
+    s = policy_scenario("ee_delta", "examples.random_policy:make")
+    s.reference.max_steps = 40
+    result = run(s, write=False)
+    assert not result.success and "(on c d)" in result.message
+    assert result.cake.reference.policy.steps == 40
+
+
+def test_a_policy_run_leaves_controller_loggers_and_verdict_as_they_are(tmp_path):
+    (tmp_path / "s.yaml").write_text(
+        "reference: !Policy {factory: examples.expert_policy:make, action_space: joint_position}\n"
+        "outputs: {render: false}\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--scenario", str(tmp_path / "s.yaml"),
+         "--out", str(tmp_path / "o"), "--quiet"],
+        capture_output=True, text=True, timeout=300, cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "goal reached: a on b on c on d on e" in r.stdout
+    for name in ("summary.json", "trajectory.npz", "joint4_torque.png", "scenario.yaml"):
+        assert (tmp_path / "o" / name).is_file()
+    assert "!Policy" in (tmp_path / "o" / "scenario.yaml").read_text()
+
+
+# --- bad input and bad policies ------------------------------------------------------------
+
+BAD = """
+import numpy as np
+
+
+class Bad:
+    def __init__(self, answer):
+        self.answer = answer
+
+    def reset(self, task, seed):
+        pass
+
+    def act(self, observation):
+        return self.answer(observation)
+
+
+def wrong_shape():
+    return Bad(lambda o: np.zeros(3))
+
+
+def nan():
+    return Bad(lambda o: np.full(7, np.nan))
+
+
+def raises():
+    def boom(o):
+        raise RuntimeError("the network is not loaded")
+    return Bad(boom)
+
+
+def strings():
+    return Bad(lambda o: "move left")
+"""
+
+
+@pytest.mark.parametrize(
+    "factory, words",
+    [
+        ("bad:wrong_shape", "returned an action of shape (3,); a ee_delta action has shape (7,)"),
+        ("bad:nan", "returned a non-finite ee_delta action"),
+        ("bad:raises", "raised RuntimeError: the network is not loaded"),
+        ("bad:strings", "returned str 'move left'"),
+    ],
+)
+def test_a_bad_policy_is_one_line_and_exit_3(tmp_path, factory, words):
+    (tmp_path / "bad.py").write_text(BAD)
+    (tmp_path / "s.yaml").write_text(
+        f"reference: !Policy {{factory: {factory}, action_space: ee_delta}}\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--scenario", "s.yaml", "--out", "o", "--quiet"],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
+    )  # fmt: skip
+    assert r.returncode == 3, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert f"policy '{factory}'" in r.stderr and words in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("reference: !Policy {action_space: ee_delta}", "needs a factory"),
+        ("reference: !Policy {factory: expert, action_space: ee_delta}", "is module:attribute"),
+        ("reference: !Policy {factory: examples.expert_policy:make, action_space: fly}",
+         "action_space 'fly'; choose one of: joint_position, ee_delta, joint_chunk"),
+        ("reference: !Policy {factory: examples.expert_policy:make, rate_hz: 0}",
+         "reference.rate_hz = 0.0 is outside"),
+        ("reference: !Policy {factory: examples.expert_policy:make, action_space: joint_chunk,"
+         " options: {horizon: 4, execute: 9}}", "1 <= execute <= horizon"),
+    ],
+)  # fmt: skip
+def test_a_policy_that_cannot_run_is_refused_before_anything_is_built(text, words):
+    s = parse_scenario(text + "\n", "s.yaml")
+    with pytest.raises(InputError, match=words.replace("(", r"\(")):
+        check(s, write=False)
+
+
+# --- Gymnasium -------------------------------------------------------------------------------
+
+
+def test_the_environment_passes_gymnasiums_checker():
+    from gymnasium.utils.env_checker import check_env
+
+    env = gymnasium.make(ENV_ID, blocks=3, obs_mode="state+rgb")
+    check_env(env.unwrapped, skip_render_check=True)
+
+
+def _bytes(x) -> list[bytes]:
+    """Every array in ``x`` (nested dicts, lists, tuples) as bytes, in order."""
+    if isinstance(x, dict):
+        return [b for k in sorted(x) for b in _bytes(x[k])]
+    if isinstance(x, list | tuple) and not all(isinstance(v, str) for v in x):
+        return [b for v in x for b in _bytes(v)]
+    return [np.asarray(x).tobytes()]
+
+
+@pytest.mark.parametrize("mode", ["state", "state+rgb"])
+def test_a_seeded_reset_and_the_same_actions_give_the_same_episode_bit_for_bit(mode):
+    runs = []
+    for _ in range(2):
+        env = gymnasium.make(ENV_ID, blocks=(3, 6), obs_mode=mode)
+        obs, info = env.reset(seed=7)
+        env.action_space.seed(3)
+        trace = [obs, info["goal"]]
+        for _ in range(5):
+            obs, reward, *_ = env.step(env.action_space.sample())
+            trace += [obs, reward]
+        runs.append(trace)
+    assert _bytes(runs[0]) == _bytes(runs[1])
+
+
+def test_another_seed_gives_another_problem():
+    env = gymnasium.make(ENV_ID, blocks=(3, 8))
+    goals = {env.reset(seed=s)[1]["goal"] for s in range(4)}
+    assert len(goals) > 1
+
+
+def test_two_environments_run_on_two_processes():
+    envs = gymnasium.vector.AsyncVectorEnv(
+        [lambda: gymnasium.make(ENV_ID, blocks=3, obs_mode="state") for _ in range(2)]
+    )
+    try:
+        obs, info = envs.reset(seed=[1, 2])
+        assert obs["state"].shape == (2, 22)
+        for _ in range(3):
+            obs, reward, terminated, truncated, info = envs.step(envs.action_space.sample())
+        assert reward.shape == (2,) and np.all((reward >= 0) & (reward <= 1))
+    finally:
+        envs.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "mode, options", [("ee_delta", {}), ("joint_chunk", {"horizon": 10, "execute": 5})]
+)
+def test_the_expert_builds_problem_5_through_the_environment(mode, options):
+    from examples.expert_policy import make
+
+    obs_mode = "state+rgb" if mode == "ee_delta" else "state"
+    env = gymnasium.make(
+        ENV_ID, problem=str(PROBLEM_5), control_mode=mode, obs_mode=obs_mode, options=options
+    )
+    obs, info = env.reset(seed=0)
+    assert info["task"] == "stack a on b, b on c, c on d, d on e, with e on the table"
+    expert = make()
+    expert.reset(env.unwrapped.policy_task, 0)
+    terminated = truncated = False
+    while not (terminated or truncated):
+        action = expert.act(obs)
+        assert not isinstance(action, tuple), "the expert ended before the goal held"
+        obs, reward, terminated, truncated, info = env.step(action)
+    assert info["is_success"] and reward == 1.0
+
+
+def test_bad_environment_options_are_one_line():
+    with pytest.raises(InputError, match="obs_mode 'depth'; choose one of"):
+        gymnasium.make(ENV_ID, obs_mode="depth")
+    with pytest.raises(InputError, match="action_space 'velocity'"):
+        gymnasium.make(ENV_ID, control_mode="velocity")
