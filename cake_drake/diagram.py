@@ -209,7 +209,7 @@ def _world_indices(scene: Scene, slots) -> WorldIndices:
 
 def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, policy):
     """A policy in place of the action source and WaypointIk (the learned layer's slot)."""
-    from cake_drake.geometric.ik import DrakeIk
+    from cake_drake.geometric.ik import DlsIk
     from cake_drake.plugins import guarded
     from cake_drake.policy.observations import goal_facts, instruction
     from cake_drake.systems.policy_source import PolicyTask, make_policy
@@ -241,7 +241,7 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
             ref.rate_hz,
             ref.max_steps,
             _world_indices(scene, slots),
-            DrakeIk(kinematics, scenario.seed),
+            DlsIk(kinematics, max_iterations=50),  # a step is small: Newton from the last
             (kinematics.lower, kinematics.upper),
             q_start,
             list(cameras),

@@ -11,9 +11,10 @@ width that the controller holds until the next step:
     OpenVLA/Bridge style: a move of the grasp frame (between the fingertips) from where it
     is measured now, dx dy dz (m, world frame, at most 0.05 each) and droll dpitch dyaw
     (rad, about world axes through the grasp point, at most 0.25 each), then the gripper,
-    0 closed to 1 open. The target pose goes through the project's IK
-    (:class:`cake_drake.geometric.ik.DrakeIk`, seeded at the last target); a pose it
-    cannot reach keeps the last target and is counted.
+    0 closed to 1 open. The target pose goes through damped least squares on Drake's
+    kinematics (:class:`cake_drake.geometric.ik.DlsIk`, at most 50 iterations, seeded at
+    the last target: a step is small); a pose it cannot reach keeps the last target and
+    is counted.
 ``joint_chunk`` (H, 8)
     pi0 style: H rows of ``joint_position`` actions at the control rate; the first
     ``execute`` rows (an option, default all) are executed before the policy is asked
