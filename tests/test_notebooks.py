@@ -19,7 +19,7 @@ from cake_drake.errors import InputError
 from cake_drake.outputs.graph import diagram_svg, graphviz_svg, ports_text
 
 NOTEBOOKS_DIR = Path(__file__).resolve().parent.parent / "notebooks"
-NOTEBOOKS = ("01_symbolic", "02_diagram", "03_computed_torque", "04_recovery")
+NOTEBOOKS = ("01_symbolic", "02_diagram", "03_computed_torque", "04_recovery", "05_policy")
 CELL_TIMEOUT_S = 300
 
 needs_dot = pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz dot not installed")
