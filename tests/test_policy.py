@@ -68,6 +68,11 @@ def test_a_policy_run_leaves_controller_loggers_and_verdict_as_they_are(tmp_path
     for name in ("summary.json", "trajectory.npz", "joint4_torque.png", "scenario.yaml"):
         assert (tmp_path / "o" / name).is_file()
     assert "!Policy" in (tmp_path / "o" / "scenario.yaml").read_text()
+    import json
+
+    policy = json.loads((tmp_path / "o" / "summary.json").read_text())["policy"]
+    assert policy["action_space"] == "joint_position" and policy["said_done"]
+    assert policy["steps"] > 100 and policy["clipped"] == 0
 
 
 # --- bad input and bad policies ------------------------------------------------------------

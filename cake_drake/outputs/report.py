@@ -96,6 +96,22 @@ def summary(result) -> dict:
         "ik_median_ms": round(float(np.median(cake.ik.times_ms)), 3)
         if cake.ik and cake.ik.times_ms
         else None,
+        "policy": _policy(cake.reference.policy),
+    }
+
+
+def _policy(source) -> dict | None:
+    """A policy run's steps, and the actions clipped to their bounds or out of reach."""
+    if source is None:
+        return None
+    c = source.counts
+    return {
+        "factory": source.label,
+        "action_space": source.space,
+        "steps": c.steps,
+        "clipped": c.clipped,
+        "unreachable": c.unreachable,
+        "said_done": source.done and c.steps < source.max_steps,
     }
 
 
