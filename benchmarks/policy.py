@@ -112,12 +112,19 @@ def main() -> None:
     print(f"(b) success over {args.seeds} generated problems of 3 to 8 blocks, ee_delta")
     for policy in ("expert_policy", "random_policy"):
         won, steps = success(policy, args.seeds, max_steps=2000 if "expert" in policy else 300)
-        rate = np.mean(won)
-        half = 1.96 * np.sqrt(max(rate * (1 - rate), 1e-9) / len(won))
+        lo, hi = wilson(sum(won), len(won))
         print(
-            f"{policy:<16} {sum(won)}/{len(won)} = {rate:.0%} (+/- {half:.0%}), "
-            f"median {int(np.median(steps))} steps"
+            f"{policy:<16} {sum(won)}/{len(won)} = {np.mean(won):.0%} "
+            f"(95 % interval {lo:.0%} to {hi:.0%}), median {int(np.median(steps))} steps"
         )
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval of a success rate k / n (sound at 0 % and 100 % too)."""
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,8 @@ simulated seconds) and returns what the policy slot observes.
 - ``obs_mode``: ``state`` (``state``: joints, gripper width, joint velocities and the grasp
   frame's pose, 22 numbers; ``cubes``: 12 rows of cube poses, zero past the problem's
   cubes), ``rgb`` (``images``: one RGB image per camera) or ``state+rgb``.
+- a generated problem whose goal already holds is drawn again (the same seed always
+  gives the same problem).
 - reward: the fraction of the goal's facts measured true in the world; ``info`` has
   ``is_success`` (every goal fact true, every stacked cube within 5 mm of the one below),
   the English instruction ``task`` and the ``goal`` facts.
@@ -135,8 +137,13 @@ class StackEnv(gymnasium.Env):
 
         super().reset(seed=seed)
         episode_seed = int(self.np_random.integers(0, 2**31 - 1))
-        scenario = self._scenario(episode_seed)
-        checked = check(scenario, write=False)
+        for _ in range(100):  # a generated goal that already holds is no episode: draw again
+            scenario = self._scenario(episode_seed)
+            checked = check(scenario, write=False)
+            view = blocksworld_view(checked.problem)
+            if self.problem is not None or not view.goal <= view.init:
+                break
+            episode_seed = int(self.np_random.integers(0, 2**31 - 1))
         plan, slots, initial = plan_and_layout(checked)
         self._held = HeldAction()
         self._cake = build_diagram(

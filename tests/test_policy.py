@@ -237,3 +237,9 @@ def test_bad_environment_options_are_one_line():
         gymnasium.make(ENV_ID, obs_mode="depth")
     with pytest.raises(InputError, match="action_space 'velocity'"):
         gymnasium.make(ENV_ID, control_mode="velocity")
+
+
+def test_no_generated_episode_starts_with_its_goal_already_holding():
+    env = gymnasium.make(ENV_ID, blocks=(3, 8))
+    starts = [env.reset(seed=s)[1] for s in range(30)]
+    assert not any(info["is_success"] for info in starts)  # seed 25 drew one, now drawn again
