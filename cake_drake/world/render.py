@@ -21,28 +21,18 @@ from pydrake.geometry import (
     RenderCameraCore,
     RenderEngineVtkParams,
 )
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from cake_drake.errors import InputError
+from cake_drake.world.cameras import look_at
 from cake_drake.world.scene import Q_HOME, WorldConfig, add_world, set_arm_positions, set_cube_poses
 
 RENDERER = "vtk"
 #: Default viewpoint: in front of and to the right of the robot, looking at the slots.
 EYE = (1.45, -1.0, 0.95)
 TARGET = (0.3, 0.0, 0.28)
-
-
-def look_at(eye: Sequence[float], target: Sequence[float]) -> RigidTransform:
-    """Camera pose ``X_WC`` (Drake camera frame: +z forward, +x right, +y down)."""
-    eye, target = np.asarray(eye, float), np.asarray(target, float)
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    return RigidTransform(RotationMatrix(np.column_stack([x, y, z])), eye)
 
 
 class Renderer:
