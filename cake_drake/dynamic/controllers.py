@@ -28,10 +28,15 @@ from typing import ClassVar, Protocol
 import numpy as np
 from pydrake.systems.controllers import InverseDynamics, InverseDynamicsController
 from pydrake.systems.framework import DiagramBuilder, OutputPort
+from pydrake.systems.primitives import Saturation
 
 from cake_drake.errors import InputError
 from cake_drake.plugins import PluginError, guarded, load_attribute, require
 from cake_drake.world.scene import Scene
+
+#: The Panda's joint torque limits (N m): 87 on joints 1-4, 12 on joints 5-7 (the URDF's
+#: ``effort``). Every controller's torque passes :func:`limit_torque` on its way to the arm.
+TORQUE_LIMITS = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 
 #: Built-in joint PD gains of the position controller (N m/rad, N m s/rad).
 POSITION_KP = (800.0, 800.0, 800.0, 800.0, 300.0, 200.0, 100.0)
@@ -115,14 +120,26 @@ class ComputedTorque:
 
 @dataclass
 class JointPd:
-    """The plant's built-in joint PD plus inverse-dynamics feed-forward of the reference."""
+    """The plant's built-in joint PD plus a feed-forward torque.
+
+    ``feedforward: true`` (the default) adds the reference's inverse dynamics,
+    M(q_d) a_d + C(q_d, v_d) v_d + g(q_d): what a position-controlled robot's firmware
+    does. ``feedforward: false`` adds only gravity compensation g(q) at the *measured*
+    state - "PD plus gravity", the baseline of drill 4.x.2 (PyBullet's position control
+    is a PD on the joint error with gravity compensation and no model of the motion).
+    """
 
     kp: list[float] = field(default_factory=lambda: list(POSITION_KP))
     kd: list[float] = field(default_factory=lambda: list(POSITION_KD))
+    feedforward: bool = True
     name: ClassVar[str] = "position"
 
     def check(self) -> None:
         _check_gains(self.kp, self.kd, "controller (JointPd)")
+        if not isinstance(self.feedforward, bool):
+            raise InputError(
+                f"controller (JointPd).feedforward must be true or false, got {self.feedforward!r}"
+            )
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
@@ -131,6 +148,16 @@ class JointPd:
         return self.gains()
 
     def add_to(self, builder, scene, desired_state, desired_acceleration) -> OutputPort:
+        builder.Connect(desired_state, scene.plant.get_desired_state_input_port(scene.arm))
+        if not self.feedforward:
+            gravity = builder.AddNamedSystem("gravity_compensation", _gravity(scene))
+            builder.Connect(
+                scene.plant.get_state_output_port(scene.arm),
+                gravity.get_input_port_estimated_state(),
+            )
+            out = gravity.get_output_port_generalized_force()
+            builder.Connect(out, scene.plant.get_actuation_input_port(scene.arm))
+            return out
         # Feed-forward: the torque the reference needs, M(q_d) a_d + C(q_d, v_d) v_d + g(q_d),
         # from Drake's InverseDynamics evaluated on the *desired* state; the PD corrects.
         feedforward = builder.AddNamedSystem(
@@ -141,12 +168,42 @@ class JointPd:
         )
         builder.Connect(desired_state, feedforward.get_input_port_estimated_state())
         builder.Connect(desired_acceleration, feedforward.get_input_port_desired_acceleration())
-        builder.Connect(desired_state, scene.plant.get_desired_state_input_port(scene.arm))
         builder.Connect(
             feedforward.get_output_port_generalized_force(),
             scene.plant.get_actuation_input_port(scene.arm),
         )
         return feedforward.get_output_port_generalized_force()
+
+
+def _gravity(scene: Scene) -> InverseDynamics:
+    """g(q) of the 7-DOF control plant (Drake's gravity-compensation mode)."""
+    return InverseDynamics(
+        scene.control_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation
+    )
+
+
+def limit_torque(builder: DiagramBuilder, scene: Scene) -> OutputPort | None:
+    """Clamp whatever drives the arm's actuation input to :data:`TORQUE_LIMITS`.
+
+    The one place between every controller (shipped or a user's) and the arm: the
+    controller has wired its torque to the plant; this reroutes that wire through a
+    ``Saturation``. Returns the port of the torque the controller *requested* (before the
+    clamp), for the saturation report, or None when nothing drives the input (a controller
+    that uses the plant's built-in PD only, which the plant clamps to the same limits).
+    """
+    actuation = scene.plant.get_actuation_input_port(scene.arm)
+    source = None
+    for (dest_system, dest_index), (src_system, src_index) in builder.connection_map().items():
+        if dest_system is scene.plant and dest_index == actuation.get_index():
+            source = src_system.get_output_port(src_index)
+    if source is None:
+        return None
+    limits = np.array(TORQUE_LIMITS)
+    saturation = builder.AddNamedSystem("torque_limits", Saturation(-limits, limits))
+    builder.Disconnect(source, actuation)
+    builder.Connect(source, saturation.get_input_port())
+    builder.Connect(saturation.get_output_port(), actuation)
+    return source
 
 
 @dataclass

@@ -219,4 +219,3 @@ def format_table(table: dict) -> str:
             f"{st['median']:>10.3f} / {st['max']:<9.3f} {'yes' if r['tower_built'] else 'no':>6}"
         )
     return "\n".join(lines)
-
