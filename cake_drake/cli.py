@@ -92,9 +92,10 @@ def run_parser() -> argparse.ArgumentParser:
     g = p.add_argument_group("overrides (each sets one scenario field)")
     g.add_argument(
         "--mode",
-        choices=("position", "torque"),
+        choices=("position", "torque", "pid"),
         help="controller: torque = InverseDynamicsController (computed torque, !ComputedTorque); "
-        "position = the plant's joint PD + feed-forward (!JointPd). Default: torque",
+        "position = the plant's joint PD + feed-forward (!JointPd); pid = Drake's "
+        "PidController + gravity compensation (!Pid). Default: torque",
     )
     g.add_argument("--kp", type=float, nargs="+", help="controller gains kp, one or seven")
     g.add_argument("--kd", type=float, nargs="+", help="controller gains kd, one or seven")
@@ -192,8 +193,9 @@ def scenario_from_args(args: argparse.Namespace):
         if values is not None:
             if not hasattr(s.controller, flag):
                 raise InputError(
-                    f"--{flag} sets the gains of !ComputedTorque or !JointPd; this scenario's "
-                    f"controller is a {type(s.controller).__name__}: set its options instead"
+                    f"--{flag} sets the gains of !ComputedTorque, !JointPd or !Pid; this "
+                    f"scenario's controller is a {type(s.controller).__name__}: set its "
+                    "options instead"
                 )
             setattr(s.controller, flag, list(values))
     task = s.task

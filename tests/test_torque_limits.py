@@ -74,3 +74,26 @@ def test_pd_plus_gravity_lags_more_than_pd_with_feedforward():
     assert baseline.saturation(TORQUE_LIMITS)["saturated_s"] == [0.0] * 7
     # the feed-forward is gravity at the measured state: joints 2 and 4 carry the arm
     assert np.abs(baseline.tau_commanded[-1][[1, 3]]).min() > 1.0
+
+
+def test_pid_at_the_default_step_is_refused_with_the_step_that_works():
+    """The explicit PID's coupled fastest mode diverges at 10 ms: refused before simulating."""
+    import pytest
+
+    from cake_drake.dynamic.controllers import Pid
+    from cake_drake.errors import InputError
+
+    with pytest.raises(
+        InputError, match=r"unstable at world.time_step 0.01 s: .* use world.time_step <= 0.001"
+    ):
+        simulate(Scenario(controller=Pid()), 0.01)
+
+
+def test_pid_holds_the_arm_at_a_millisecond_step():
+    from cake_drake.dynamic.controllers import Pid
+
+    s = Scenario(controller=Pid())
+    s.world.time_step = 0.001
+    logs = simulate(s, 0.3)
+    assert np.max(np.abs(logs.q - logs.q_d)) < 0.1
+    assert logs.saturation(TORQUE_LIMITS)["saturated_s"] == [0.0] * 7

@@ -26,9 +26,9 @@ from dataclasses import dataclass, field
 from typing import ClassVar, Protocol
 
 import numpy as np
-from pydrake.systems.controllers import InverseDynamics, InverseDynamicsController
+from pydrake.systems.controllers import InverseDynamics, InverseDynamicsController, PidController
 from pydrake.systems.framework import DiagramBuilder, OutputPort
-from pydrake.systems.primitives import Saturation
+from pydrake.systems.primitives import Adder, Saturation
 
 from cake_drake.errors import InputError
 from cake_drake.plugins import PluginError, guarded, load_attribute, require
@@ -206,6 +206,102 @@ def limit_torque(builder: DiagramBuilder, scene: Scene) -> OutputPort | None:
     return source
 
 
+#: The Panda's joint inertias at home, diag M(Q_HOME) of the control plant (kg m^2), from
+#: which the !Pid gains are scaled so that every joint is the same loop.
+HOME_INERTIA = (0.7947, 1.6439, 1.0668, 0.86, 0.0299, 0.04, 0.003)
+#: The !Pid loop's natural frequency per joint (rad/s).
+PID_OMEGA = (15.0, 30.0, 15.0, 30.0, 30.0, 30.0, 30.0)
+PID_KP = tuple(round(m * w**2, 3) for m, w in zip(HOME_INERTIA, PID_OMEGA, strict=True))
+PID_KD = tuple(round(m * 2 * w, 3) for m, w in zip(HOME_INERTIA, PID_OMEGA, strict=True))
+#: Largest Kd M^-1 eigenvalue times the step the explicit loop tolerates (2 is the
+#: stability edge of an explicitly integrated damper; half of it keeps a margin).
+PID_MAX_STEP_RATIO = 1.0
+PID_KI = tuple(round(m * 2 * w**2, 3) for m, w in zip(HOME_INERTIA, PID_OMEGA, strict=True))
+
+
+@dataclass
+class Pid:
+    """Drake's ``PidController`` on the joint error plus gravity compensation g(q).
+
+    tau = Kp e + Ki integral(e) + Kd e' + g(q), gains in N m/rad, N m/(rad s), N m s/rad,
+    one or seven. Unlike the plant's built-in PD this torque is *explicit*: the plant holds
+    it over each step, so the loop is stable only while its fastest mode moves little per
+    step. The defaults give every joint the same loop whatever its inertia: Kp = I w^2,
+    Kd = 2 I w (critically damped), Ki = 2 I w^2 (characteristic polynomial
+    s^3 + 2w s^2 + w^2 s + 2w^2: stable, the integral pole slow), with I the joint's
+    inertia at home (:data:`HOME_INERTIA`) and w (:data:`PID_OMEGA`) 15 rad/s on joints 1
+    and 3, 30 on the others. The arm is coupled, though: at home joints 1 and 3 are nearly
+    aligned, and counter-rotating they form a mode of little inertia where the largest
+    eigenvalue of Kd M^-1 is about 890 1/s. Explicit damping diverges when that times the
+    step passes 2: at the 10 ms step (8.9) the arm flies apart, so the defaults need
+    ``world.time_step: 0.001`` (0.89); at w = 10 on 1-4 the shoulder trails by 40 mrad
+    (3 cm at the hand), too much to grasp a 4 cm cube. :meth:`add_to` computes these
+    figures and refuses, before simulating, a step where they exceed
+    :data:`PID_MAX_STEP_RATIO`. The integral
+    removes the steady error a model mismatch leaves (an unknown payload); a PD cannot.
+    """
+
+    kp: list[float] = field(default_factory=lambda: list(PID_KP))
+    ki: list[float] = field(default_factory=lambda: list(PID_KI))
+    kd: list[float] = field(default_factory=lambda: list(PID_KD))
+    name: ClassVar[str] = "pid"
+
+    def check(self) -> None:
+        _check_gains(self.kp, self.kd, "controller (Pid)")
+        ki = per_joint(self.ki, "controller (Pid).ki")
+        if np.any(ki < 0):
+            raise InputError(f"controller (Pid): ki must be >= 0 (got ki={self.ki})")
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
+
+    def arm_pd_gains(self) -> None:
+        return None
+
+    def stability(self, scene: Scene, time_step: float) -> tuple[float, float]:
+        """(max eigenvalue of Kd M^-1, max sqrt eigenvalue of Kp M^-1) times ``time_step``
+        at home: the fastest modes of the explicit loop per step (the coupled arm's, not
+        one joint's: joints 1 and 3 counter-rotating have little inertia)."""
+        from scipy.linalg import eigh
+
+        from cake_drake.world.scene import Q_HOME
+
+        plant = scene.control_plant
+        context = plant.CreateDefaultContext()
+        plant.SetPositions(context, Q_HOME)
+        M = plant.CalcMassMatrix(context)
+        kp, kd = self.gains()
+        damping = float(eigh(np.diag(kd), M, eigvals_only=True).max())
+        stiffness = float(np.sqrt(eigh(np.diag(kp), M, eigvals_only=True).max()))
+        return damping * time_step, stiffness * time_step
+
+    def add_to(self, builder, scene, desired_state, desired_acceleration) -> OutputPort:
+        dt = scene.plant.time_step()
+        damping, stiffness = self.stability(scene, dt)
+        if damping > PID_MAX_STEP_RATIO or stiffness > PID_MAX_STEP_RATIO / 2:
+            largest = dt * min(PID_MAX_STEP_RATIO / damping, PID_MAX_STEP_RATIO / 2 / stiffness)
+            raise InputError(
+                f"controller (Pid): unstable at world.time_step {dt:g} s: its fastest mode "
+                f"moves {damping:.2f} (damping) and {stiffness:.2f} (stiffness) per step, "
+                f"more than {PID_MAX_STEP_RATIO:g} and {PID_MAX_STEP_RATIO / 2:g}; use "
+                f"world.time_step <= {largest:.2g} or lower gains"
+            )
+        kp, kd = self.gains()
+        pid = builder.AddNamedSystem(
+            "pid_controller", PidController(kp, per_joint(self.ki, "ki"), kd)
+        )
+        gravity = builder.AddNamedSystem("gravity_compensation", _gravity(scene))
+        total = builder.AddNamedSystem("pid_plus_gravity", Adder(2, 7))
+        state = scene.plant.get_state_output_port(scene.arm)
+        builder.Connect(state, pid.get_input_port_estimated_state())
+        builder.Connect(desired_state, pid.get_input_port_desired_state())
+        builder.Connect(state, gravity.get_input_port_estimated_state())
+        builder.Connect(pid.get_output_port_control(), total.get_input_port(0))
+        builder.Connect(gravity.get_output_port_generalized_force(), total.get_input_port(1))
+        builder.Connect(total.get_output_port(), scene.plant.get_actuation_input_port(scene.arm))
+        return total.get_output_port()
+
+
 @dataclass
 class CustomController:
     """A controller of the user's: ``factory`` (``module:attribute``) called as
@@ -219,9 +315,9 @@ class CustomController:
 
 
 #: The controller configs a scenario's ``controller:`` section can hold (by YAML tag).
-ControllerConfig = ComputedTorque | JointPd | CustomController
+ControllerConfig = ComputedTorque | JointPd | Pid | CustomController
 #: ``--mode`` names of the shipped controllers.
-MODES = {"torque": ComputedTorque, "position": JointPd}
+MODES = {"torque": ComputedTorque, "position": JointPd, "pid": Pid}
 
 
 def make_controller(config: ControllerConfig) -> Controller:
