@@ -12,8 +12,8 @@ logs; it returns:
   poses);
 * one :class:`Replay` per Kd (its logs), for :func:`comparison_plot` (``kd_comparison.png``).
 
-``python -m cake_drake.gains`` is the command (``gains/__main__.py``; parsing in
-:mod:`cake_drake.cli`, which the library never imports).
+``python -m cake_drake.gains`` is the command (``gains/__main__.py``; its parsing lives
+with the other commands', which the library never imports).
 """
 
 from __future__ import annotations
