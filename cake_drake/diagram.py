@@ -27,7 +27,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder, System
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from cake_drake.dynamic.controllers import Controller, make_controller
+from cake_drake.dynamic.controllers import Controller, limit_torque, make_controller
 from cake_drake.dynamic.reference import ReferenceTrajectory
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import Kinematics, make_solver
@@ -326,12 +326,14 @@ def build_diagram(
     tau = controller.add_to(
         builder, scene, reference.port("desired_state"), reference.port("desired_acceleration")
     )
+    requested = limit_torque(builder, scene) or tau
 
     dt = scenario.world.time_step
     loggers: dict[str, VectorLogSink] = {
         "state": LogVectorOutput(plant.get_state_output_port(scene.arm), builder, dt),
         "tau_commanded": LogVectorOutput(tau, builder, dt),
         "tau_applied": LogVectorOutput(plant.get_net_actuation_output_port(scene.arm), builder, dt),
+        "tau_requested": LogVectorOutput(requested, builder, dt),
     }
     for name in LOGGED_REFERENCE_PORTS:
         loggers[name] = LogVectorOutput(reference.port(name), builder, dt)

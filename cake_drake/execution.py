@@ -43,6 +43,25 @@ class Logs:
     action: np.ndarray  # (N,) action index (-1 idle)
     tau_commanded: np.ndarray  # (N, 7) controller output
     tau_applied: np.ndarray  # (N, 7) net actuation on the arm joints (PD included)
+    tau_requested: np.ndarray | None = None  # (N, 7) actuation asked of the arm, before limits
+
+    def saturation(self, limits) -> dict:
+        """Per joint: the time (s) the torque sat at its limit, and the peak asked (N m).
+
+        A joint is saturated at a sample when the torque requested of its actuator exceeds
+        the limit, or when the applied torque (the plant's built-in PD included, which the
+        plant clamps itself) reaches it.
+        """
+        limits = np.asarray(limits, dtype=float)
+        asked = self.tau_applied if self.tau_requested is None else self.tau_requested
+        peak = np.maximum(np.abs(asked), np.abs(self.tau_applied))
+        at_limit = (np.abs(asked) > limits) | (np.abs(self.tau_applied) >= limits * (1 - 1e-6))
+        dt = float(np.median(np.diff(self.t))) if len(self.t) > 1 else 0.0
+        return {
+            "limits_nm": limits.tolist(),
+            "saturated_s": (at_limit.sum(axis=0) * dt).round(3).tolist(),
+            "peak_nm": (peak.max(axis=0) if len(peak) else np.zeros(7)).round(2).tolist(),
+        }
 
     def tracking_error(self) -> dict[str, list[float]]:
         e = self.q - self.q_d
@@ -97,6 +116,7 @@ def _logs(cake: CakeDiagram, context) -> Logs:
         action=labels[1].round().astype(int),
         tau_commanded=rows("tau_commanded").T,
         tau_applied=rows("tau_applied").T,
+        tau_requested=rows("tau_requested").T if "tau_requested" in data else None,
     )
 
 

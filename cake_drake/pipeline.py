@@ -525,6 +525,7 @@ def run(
         execution = execute(cake, sim.max_sim_s, sim.settle_s, progress=progress, moves=moves)
         for warning in execution.warnings:
             print(f"warning: collision: {warning}", file=sys.stderr)
+        warn_saturation(execution.logs)
         stages["simulation"] = execution.wall_s
         if cake.ik is not None:
             stages["ik"] = sum(cake.ik.times_ms) / 1000
@@ -553,3 +554,18 @@ def run(
 
 
 __all__ = ["Checked", "RunResult", "check", "check_table_room", "get_plan", "run", "verdict"]
+
+
+def warn_saturation(logs) -> None:
+    """One stderr line when any joint's torque sat at the Panda's limit."""
+    from cake_drake.dynamic.controllers import TORQUE_LIMITS
+
+    sat = logs.saturation(TORQUE_LIMITS)
+    hit = [j for j, s in enumerate(sat["saturated_s"]) if s > 0]
+    if hit:
+        joints = ", ".join(
+            f"joint {j + 1} {sat['saturated_s'][j]:g} s (peak {sat['peak_nm'][j]:g} of "
+            f"{TORQUE_LIMITS[j]:g} N m)"
+            for j in hit
+        )
+        print(f"warning: torque saturated: {joints}", file=sys.stderr)

@@ -38,6 +38,7 @@ from cake_drake.dynamic.controllers import (
     ControllerConfig,
     CustomController,
     JointPd,
+    Pid,
 )
 from cake_drake.errors import InputError
 from cake_drake.geometric.trajectory import Timing
@@ -517,6 +518,7 @@ __all__ = [
     "CustomController",
     "Generate",
     "JointPd",
+    "Pid",
     "Motion",
     "Outputs",
     "Planned",

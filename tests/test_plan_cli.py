@@ -55,7 +55,7 @@ def test_default_is_problem_5_with_the_optimal_plan():
     assert lines[10].startswith(
         "planner astar-lmcut: search A*, heuristic LM-cut, 10 actions (optimal), "
     )
-    assert "10 actions is the optimum for problem_5" in lines[11]
+    assert "10 actions is the optimum for problem_5, proved by astar-lmcut" in lines[11]
     assert "'12'" in lines[11] and "satisficing" in lines[11]
 
 
@@ -64,9 +64,22 @@ def test_satisficing_planner_says_so_and_writes_the_plan(tmp_path):
     r = plan_cli(D, P, "--planner", "gbfs-ff", "-o", str(out))
     assert r.returncode == 0, r.stderr
     assert "14 actions (satisficing)" in r.stdout
-    assert "the optimal plan for problem_5 has 10 actions" in r.stdout
+    assert "returned 14 actions, 4 more than the optimum of 10" in r.stdout
     assert len(read_plan(out)) == 14
     assert "; planner: gbfs-ff (satisficing: a shorter plan may exist)" in out.read_text()
+
+
+def test_lama_note_says_what_lama_returned():
+    """lama-first returns the optimum (10) on problem_5: the note must not claim 12."""
+    from cake_drake.symbolic import fast_downward
+
+    assert fast_downward.available(), "the fd extra is part of the test extra"
+    r = plan_cli(D, P, "--planner", "fd-lama-first")
+    assert r.returncode == 0, r.stderr
+    assert "10 actions (satisficing)" in r.stdout
+    note = r.stdout.splitlines()[-1]
+    assert "its 10-action plan is the optimum for problem_5" in note
+    assert "not what this one returned" in note
 
 
 def test_generated_problem(tmp_path):

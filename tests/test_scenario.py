@@ -69,7 +69,7 @@ def test_package_versions_agree_with_the_installed_metadata():
     "text, words",
     [
         ("world:\n  time_stp: 0.01\n", ["x.yaml:2", "'time_stp'", "valid keys: time_step"]),
-        ("controller: !Pid {}\n", ["x.yaml:1", "!Pid", "!ComputedTorque, !JointPd"]),
+        ("controller: !Lqr {}\n", ["x.yaml:1", "!Lqr", "!ComputedTorque, !JointPd, !Pid"]),
         ("seed: 1\nworld:\n  time_step: fast\n", ["x.yaml:3", "world.time_step", "finite"]),
         ("world: {time_step: .nan}\n", ["x.yaml:1", "finite"]),
         ("task: [1, 2]\n", ["x.yaml:1", "task must be a mapping"]),

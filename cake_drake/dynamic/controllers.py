@@ -26,12 +26,17 @@ from dataclasses import dataclass, field
 from typing import ClassVar, Protocol
 
 import numpy as np
-from pydrake.systems.controllers import InverseDynamics, InverseDynamicsController
+from pydrake.systems.controllers import InverseDynamics, InverseDynamicsController, PidController
 from pydrake.systems.framework import DiagramBuilder, OutputPort
+from pydrake.systems.primitives import Adder, Saturation
 
 from cake_drake.errors import InputError
 from cake_drake.plugins import PluginError, guarded, load_attribute, require
 from cake_drake.world.scene import Scene
+
+#: The Panda's joint torque limits (N m): 87 on joints 1-4, 12 on joints 5-7 (the URDF's
+#: ``effort``). Every controller's torque passes :func:`limit_torque` on its way to the arm.
+TORQUE_LIMITS = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 
 #: Built-in joint PD gains of the position controller (N m/rad, N m s/rad).
 POSITION_KP = (800.0, 800.0, 800.0, 800.0, 300.0, 200.0, 100.0)
@@ -115,14 +120,26 @@ class ComputedTorque:
 
 @dataclass
 class JointPd:
-    """The plant's built-in joint PD plus inverse-dynamics feed-forward of the reference."""
+    """The plant's built-in joint PD plus a feed-forward torque.
+
+    ``feedforward: true`` (the default) adds the reference's inverse dynamics,
+    M(q_d) a_d + C(q_d, v_d) v_d + g(q_d): what a position-controlled robot's firmware
+    does. ``feedforward: false`` adds only gravity compensation g(q) at the *measured*
+    state - "PD plus gravity", the baseline of drill 4.x.2 (PyBullet's position control
+    is a PD on the joint error with gravity compensation and no model of the motion).
+    """
 
     kp: list[float] = field(default_factory=lambda: list(POSITION_KP))
     kd: list[float] = field(default_factory=lambda: list(POSITION_KD))
+    feedforward: bool = True
     name: ClassVar[str] = "position"
 
     def check(self) -> None:
         _check_gains(self.kp, self.kd, "controller (JointPd)")
+        if not isinstance(self.feedforward, bool):
+            raise InputError(
+                f"controller (JointPd).feedforward must be true or false, got {self.feedforward!r}"
+            )
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
@@ -131,6 +148,16 @@ class JointPd:
         return self.gains()
 
     def add_to(self, builder, scene, desired_state, desired_acceleration) -> OutputPort:
+        builder.Connect(desired_state, scene.plant.get_desired_state_input_port(scene.arm))
+        if not self.feedforward:
+            gravity = builder.AddNamedSystem("gravity_compensation", _gravity(scene))
+            builder.Connect(
+                scene.plant.get_state_output_port(scene.arm),
+                gravity.get_input_port_estimated_state(),
+            )
+            out = gravity.get_output_port_generalized_force()
+            builder.Connect(out, scene.plant.get_actuation_input_port(scene.arm))
+            return out
         # Feed-forward: the torque the reference needs, M(q_d) a_d + C(q_d, v_d) v_d + g(q_d),
         # from Drake's InverseDynamics evaluated on the *desired* state; the PD corrects.
         feedforward = builder.AddNamedSystem(
@@ -141,12 +168,138 @@ class JointPd:
         )
         builder.Connect(desired_state, feedforward.get_input_port_estimated_state())
         builder.Connect(desired_acceleration, feedforward.get_input_port_desired_acceleration())
-        builder.Connect(desired_state, scene.plant.get_desired_state_input_port(scene.arm))
         builder.Connect(
             feedforward.get_output_port_generalized_force(),
             scene.plant.get_actuation_input_port(scene.arm),
         )
         return feedforward.get_output_port_generalized_force()
+
+
+def _gravity(scene: Scene) -> InverseDynamics:
+    """g(q) of the 7-DOF control plant (Drake's gravity-compensation mode)."""
+    return InverseDynamics(
+        scene.control_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation
+    )
+
+
+def limit_torque(builder: DiagramBuilder, scene: Scene) -> OutputPort | None:
+    """Clamp whatever drives the arm's actuation input to :data:`TORQUE_LIMITS`.
+
+    The one place between every controller (shipped or a user's) and the arm: the
+    controller has wired its torque to the plant; this reroutes that wire through a
+    ``Saturation``. Returns the port of the torque the controller *requested* (before the
+    clamp), for the saturation report, or None when nothing drives the input (a controller
+    that uses the plant's built-in PD only, which the plant clamps to the same limits).
+    """
+    actuation = scene.plant.get_actuation_input_port(scene.arm)
+    source = None
+    for (dest_system, dest_index), (src_system, src_index) in builder.connection_map().items():
+        if dest_system is scene.plant and dest_index == actuation.get_index():
+            source = src_system.get_output_port(src_index)
+    if source is None:
+        return None
+    limits = np.array(TORQUE_LIMITS)
+    saturation = builder.AddNamedSystem("torque_limits", Saturation(-limits, limits))
+    builder.Disconnect(source, actuation)
+    builder.Connect(source, saturation.get_input_port())
+    builder.Connect(saturation.get_output_port(), actuation)
+    return source
+
+
+#: The Panda's joint inertias at home, diag M(Q_HOME) of the control plant (kg m^2), from
+#: which the !Pid gains are scaled so that every joint is the same loop.
+HOME_INERTIA = (0.7947, 1.6439, 1.0668, 0.86, 0.0299, 0.04, 0.003)
+#: The !Pid loop's natural frequency per joint (rad/s).
+PID_OMEGA = (15.0, 30.0, 15.0, 30.0, 30.0, 30.0, 30.0)
+PID_KP = tuple(round(m * w**2, 3) for m, w in zip(HOME_INERTIA, PID_OMEGA, strict=True))
+PID_KD = tuple(round(m * 2 * w, 3) for m, w in zip(HOME_INERTIA, PID_OMEGA, strict=True))
+#: Largest Kd M^-1 eigenvalue times the step the explicit loop tolerates (2 is the
+#: stability edge of an explicitly integrated damper; half of it keeps a margin).
+PID_MAX_STEP_RATIO = 1.0
+PID_KI = tuple(round(m * 2 * w**2, 3) for m, w in zip(HOME_INERTIA, PID_OMEGA, strict=True))
+
+
+@dataclass
+class Pid:
+    """Drake's ``PidController`` on the joint error plus gravity compensation g(q).
+
+    tau = Kp e + Ki integral(e) + Kd e' + g(q), gains in N m/rad, N m/(rad s), N m s/rad,
+    one or seven. Unlike the plant's built-in PD this torque is *explicit*: the plant holds
+    it over each step, so the loop is stable only while its fastest mode moves little per
+    step. The defaults give every joint the same loop whatever its inertia: Kp = I w^2,
+    Kd = 2 I w (critically damped), Ki = 2 I w^2 (characteristic polynomial
+    s^3 + 2w s^2 + w^2 s + 2w^2: stable, the integral pole slow), with I the joint's
+    inertia at home (:data:`HOME_INERTIA`) and w (:data:`PID_OMEGA`) 15 rad/s on joints 1
+    and 3, 30 on the others. The arm is coupled, though: at home joints 1 and 3 are nearly
+    aligned, and counter-rotating they form a mode of little inertia where the largest
+    eigenvalue of Kd M^-1 is about 890 1/s. Explicit damping diverges when that times the
+    step passes 2: at the 10 ms step (8.9) the arm flies apart, so the defaults need
+    ``world.time_step: 0.001`` (0.89); at w = 10 on 1-4 the shoulder trails by 40 mrad
+    (3 cm at the hand), too much to grasp a 4 cm cube. :meth:`add_to` computes these
+    figures and refuses, before simulating, a step where they exceed
+    :data:`PID_MAX_STEP_RATIO`. The integral
+    removes the steady error a model mismatch leaves (an unknown payload); a PD cannot.
+    """
+
+    kp: list[float] = field(default_factory=lambda: list(PID_KP))
+    ki: list[float] = field(default_factory=lambda: list(PID_KI))
+    kd: list[float] = field(default_factory=lambda: list(PID_KD))
+    name: ClassVar[str] = "pid"
+
+    def check(self) -> None:
+        _check_gains(self.kp, self.kd, "controller (Pid)")
+        ki = per_joint(self.ki, "controller (Pid).ki")
+        if np.any(ki < 0):
+            raise InputError(f"controller (Pid): ki must be >= 0 (got ki={self.ki})")
+
+    def gains(self) -> tuple[np.ndarray, np.ndarray]:
+        return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
+
+    def arm_pd_gains(self) -> None:
+        return None
+
+    def stability(self, scene: Scene, time_step: float) -> tuple[float, float]:
+        """(max eigenvalue of Kd M^-1, max sqrt eigenvalue of Kp M^-1) times ``time_step``
+        at home: the fastest modes of the explicit loop per step (the coupled arm's, not
+        one joint's: joints 1 and 3 counter-rotating have little inertia)."""
+        from scipy.linalg import eigh
+
+        from cake_drake.world.scene import Q_HOME
+
+        plant = scene.control_plant
+        context = plant.CreateDefaultContext()
+        plant.SetPositions(context, Q_HOME)
+        M = plant.CalcMassMatrix(context)
+        kp, kd = self.gains()
+        damping = float(eigh(np.diag(kd), M, eigvals_only=True).max())
+        stiffness = float(np.sqrt(eigh(np.diag(kp), M, eigvals_only=True).max()))
+        return damping * time_step, stiffness * time_step
+
+    def add_to(self, builder, scene, desired_state, desired_acceleration) -> OutputPort:
+        dt = scene.plant.time_step()
+        damping, stiffness = self.stability(scene, dt)
+        if damping > PID_MAX_STEP_RATIO or stiffness > PID_MAX_STEP_RATIO / 2:
+            largest = dt * min(PID_MAX_STEP_RATIO / damping, PID_MAX_STEP_RATIO / 2 / stiffness)
+            raise InputError(
+                f"controller (Pid): unstable at world.time_step {dt:g} s: its fastest mode "
+                f"moves {damping:.2f} (damping) and {stiffness:.2f} (stiffness) per step, "
+                f"more than {PID_MAX_STEP_RATIO:g} and {PID_MAX_STEP_RATIO / 2:g}; use "
+                f"world.time_step <= {largest:.2g} or lower gains"
+            )
+        kp, kd = self.gains()
+        pid = builder.AddNamedSystem(
+            "pid_controller", PidController(kp, per_joint(self.ki, "ki"), kd)
+        )
+        gravity = builder.AddNamedSystem("gravity_compensation", _gravity(scene))
+        total = builder.AddNamedSystem("pid_plus_gravity", Adder(2, 7))
+        state = scene.plant.get_state_output_port(scene.arm)
+        builder.Connect(state, pid.get_input_port_estimated_state())
+        builder.Connect(desired_state, pid.get_input_port_desired_state())
+        builder.Connect(state, gravity.get_input_port_estimated_state())
+        builder.Connect(pid.get_output_port_control(), total.get_input_port(0))
+        builder.Connect(gravity.get_output_port_generalized_force(), total.get_input_port(1))
+        builder.Connect(total.get_output_port(), scene.plant.get_actuation_input_port(scene.arm))
+        return total.get_output_port()
 
 
 @dataclass
@@ -162,9 +315,9 @@ class CustomController:
 
 
 #: The controller configs a scenario's ``controller:`` section can hold (by YAML tag).
-ControllerConfig = ComputedTorque | JointPd | CustomController
+ControllerConfig = ComputedTorque | JointPd | Pid | CustomController
 #: ``--mode`` names of the shipped controllers.
-MODES = {"torque": ComputedTorque, "position": JointPd}
+MODES = {"torque": ComputedTorque, "position": JointPd, "pid": Pid}
 
 
 def make_controller(config: ControllerConfig) -> Controller:

@@ -7,6 +7,7 @@ import time
 import numpy as np
 from pydrake.math import RollPitchYaw
 
+from cake_drake.dynamic.controllers import TORQUE_LIMITS
 from cake_drake.errors import InputError, OutputError
 from cake_drake.geometric.trajectory import save_npz
 from cake_drake.outputs.files import OutputDir
@@ -92,6 +93,7 @@ def summary(result) -> dict:
         "rtf": round(execution.rtf, 2),
         "stages_s": {k: round(v, 4) for k, v in stages.items()},
         "tracking_error": logs.tracking_error(),
+        "torque_saturation": logs.saturation(TORQUE_LIMITS),
         "ik_solves": len(cake.ik.times_ms) if cake.ik else 0,
         "ik_median_ms": round(float(np.median(cake.ik.times_ms)), 3)
         if cake.ik and cake.ik.times_ms

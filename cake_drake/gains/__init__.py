@@ -12,13 +12,13 @@ logs; it returns:
   poses);
 * one :class:`Replay` per Kd (its logs), for :func:`comparison_plot` (``kd_comparison.png``).
 
-``python -m cake_drake.gains`` is the command (parsing in :mod:`cake_drake.cli`).
+``python -m cake_drake.gains`` is the command (``gains/__main__.py``; its parsing lives
+with the other commands', which the library never imports).
 """
 
 from __future__ import annotations
 
 import shutil
-import sys
 import tempfile
 from collections.abc import Sequence
 from copy import deepcopy
@@ -29,7 +29,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from cake_drake.dynamic.analysis import settling
-from cake_drake.errors import ExecutionError, InputError, run_cli
+from cake_drake.errors import ExecutionError, InputError
 from cake_drake.execution import Logs
 from cake_drake.outputs.files import OutputDir
 from cake_drake.pipeline import check, run, run_inputs
@@ -219,9 +219,3 @@ def format_table(table: dict) -> str:
             f"{st['median']:>10.3f} / {st['max']:<9.3f} {'yes' if r['tower_built'] else 'no':>6}"
         )
     return "\n".join(lines)
-
-
-if __name__ == "__main__":
-    from cake_drake.cli import main_gains
-
-    sys.exit(run_cli(main_gains))
