@@ -101,11 +101,9 @@ def test_a_scenario_over_16_mib_is_refused_unread(tmp_path):
 )
 def test_a_sweep_is_checked_like_its_runs_before_anything_runs(tmp_path, text, words):
     (tmp_path / "sweep.yaml").write_text(text)
-    t0 = time.monotonic()
     r = cake("sweep", "sweep.yaml", "--out", "out", "--quiet", cwd=tmp_path)
     refused(r, *words)
-    assert not (tmp_path / "out").exists()
-    assert time.monotonic() - t0 < 100  # generous: expanding would take far longer
+    assert not (tmp_path / "out").exists()  # refused before any run or folder
 
 
 def test_an_npz_whose_arrays_are_huge_is_refused_by_its_headers(tmp_path):
