@@ -146,6 +146,10 @@ def run_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="motion.avoid_collisions: re-plan colliding moves higher or with the hand turned",
     )
+    g.add_argument(
+        "--motion-planner",
+        help="motion.planner: straight | rrt-connect | module:attribute",
+    )
     g.add_argument("--seed", type=int, help="seed (the IK's random restarts draw from it)")
     g.add_argument(
         "--meshcat", action="store_true", help="visualization.meshcat: watch, save replay.html"
@@ -244,6 +248,8 @@ def scenario_from_args(args: argparse.Namespace):
         s.motion.collision_check = False
     if args.avoid_collisions:
         s.motion.avoid_collisions = True
+    if args.motion_planner is not None:
+        s.motion.planner = args.motion_planner
     if args.seed is not None:
         s.seed = args.seed
     if args.meshcat:

@@ -30,8 +30,10 @@ from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 from cake_drake.dynamic.controllers import Controller, limit_torque, make_controller
 from cake_drake.dynamic.reference import ReferenceTrajectory
 from cake_drake.geometric.collisions import CollisionChecker
+from cake_drake.geometric.free_space import FreeSpace
 from cake_drake.geometric.ik import Kinematics, make_solver
-from cake_drake.geometric.solve import TimedSolver
+from cake_drake.geometric.planners import make_planner
+from cake_drake.geometric.solve import Planning, TimedSolver
 from cake_drake.plugins import PluginError, is_plugin
 from cake_drake.scenario import Policy, Recorded, Scenario, resolve_path
 from cake_drake.symbolic import GroundAction, Problem
@@ -151,6 +153,15 @@ def _add_reference(
     motion = scenario.motion
     # Checks in the simulation's own world (bound once the Diagram is built).
     checker = CollisionChecker(list(scene.cubes), scene=scene) if motion.collision_check else None
+    planning = None
+    if motion.planner != "straight":
+        planning = Planning(
+            FreeSpace(list(scene.cubes)),
+            make_planner(motion.planner),
+            motion.planner,
+            scenario.seed,
+            (kinematics.lower, kinematics.upper),
+        )
     indices = _world_indices(scene, slots)
     context = SourceContext(
         tuple(actions), problem, indices, planner, scenario.world.time_step, ref.max_replans
@@ -163,6 +174,7 @@ def _add_reference(
         checker,
         motion.avoid_collisions,
         meaning=lambda action: roles.classify(action).canonical(),
+        planning=planning,
     )
     waypoint_ik = builder.AddNamedSystem(
         "waypoint_ik",

@@ -150,7 +150,11 @@ def plugin_specs(scenario) -> dict[str, str]:
     """The scenario's plug-ins (``module:attribute``) and what each is."""
     from cake_drake.scenario import Planned
 
-    named = [(scenario.task.planner, "planner"), (scenario.motion.ik, "IK solver")]
+    named = [
+        (scenario.task.planner, "planner"),
+        (scenario.motion.ik, "IK solver"),
+        (scenario.motion.planner, "motion planner"),
+    ]
     if isinstance(scenario.reference, Planned):
         named.append((scenario.reference.action_source, "action source"))
     factory = getattr(scenario.controller, "factory", None)

@@ -127,6 +127,11 @@ def _check_numbers(s: Scenario) -> None:
     _range(wp.place_drop, 0.0, 0.05, "motion.waypoints.place_drop", " m")
     _range(wp.release_height, 0.0, 0.05, "motion.waypoints.release_height", " m")
     _range(wp.slot_clearance, 0.0, 0.5, "motion.waypoints.slot_clearance", " m")
+    if m.avoid_collisions and m.planner != "straight":
+        raise InputError(
+            f"motion.avoid_collisions and motion.planner {m.planner} both given: the planner "
+            "already chooses motions that hit nothing; drop one"
+        )
     if m.avoid_collisions and not m.collision_check:
         raise InputError(
             "motion.avoid_collisions needs motion.collision_check (--avoid-collisions "
@@ -198,6 +203,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     from cake_drake.dynamic.controllers import make_controller
     from cake_drake.dynamic.reference import ReferenceTrajectory
     from cake_drake.geometric.ik import SOLVERS
+    from cake_drake.geometric.planners import make_planner
     from cake_drake.systems import ACTION_SOURCES
 
     s = scenario
@@ -251,6 +257,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     else:
         resolve(s.reference.action_source, ACTION_SOURCES, "action source")
         resolve(s.motion.ik, SOLVERS, "IK solver")
+        make_planner(s.motion.planner)
     view = blocksworld_view(problem)
     check_faults([f for f in s.faults if not isinstance(f, Slip)], view.blocks, n_actions=1 << 30)
     out = Path(s.outputs.folder) if write else None

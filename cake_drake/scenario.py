@@ -95,6 +95,10 @@ class Motion:
     waypoints: WaypointParams = field(default_factory=WaypointParams)
     collision_check: bool = True  # report planned moves that sweep through cubes
     avoid_collisions: bool = False  # re-plan such moves higher or with the hand turned
+    #: ``straight`` (the exercise's joint-space lines, blocked or not), ``rrt-connect``
+    #: (grasps and places chosen free, blocked moves planned with OMPL) or
+    #: module:attribute (a factory ``() -> planner``, see cake_drake.geometric.planners).
+    planner: str = "straight"
 
 
 @dataclass

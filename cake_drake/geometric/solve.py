@@ -4,14 +4,23 @@ from __future__ import annotations
 
 import math
 import time
+import zlib
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from pydrake.math import RigidTransform
 
 from cake_drake.errors import IkError
-from cake_drake.geometric.collisions import Collision, CollisionChecker, action_collisions
+from cake_drake.geometric.collisions import (
+    FINGERS_HOLDING,
+    FINGERS_OPEN,
+    Collision,
+    CollisionChecker,
+    action_collisions,
+)
+from cake_drake.geometric.free_space import FreeSpace
 from cake_drake.geometric.ik import IkSolver
+from cake_drake.geometric.planners import QUERY_BUDGET_S, MoveQuery, ask
 from cake_drake.geometric.trajectory import (
     GRIPPER_CLOSED,
     GRIPPER_OPEN,
@@ -99,34 +108,199 @@ def _solve(ik: IkSolver, wp: Waypoint, q_seed, action, index: int) -> np.ndarray
     return q
 
 
+def _solve_all(action, index, world, ik, q_start, params, after=None):
+    """The waypoints of ``action`` after phase ``after`` (all when None) and their IK
+    solutions, each seeded from the one before (the first from ``q_start``)."""
+    waypoints = waypoints_for(action, world, params)
+    if after is not None:
+        waypoints = waypoints[[w.phase for w in waypoints].index(after) + 1 :]
+    solutions = []
+    q_seed = q_start
+    p_seed = world.X_WG.translation()  # where the hand is at q_seed
+    for wp in waypoints:
+        if wp.phase in TRANSIT_PHASES:
+            q_seed = _swing_seed(q_seed, p_seed, wp.X_WG.translation())
+        q = _solve(ik, wp, q_seed, action, index)
+        solutions.append(q)
+        q_seed, p_seed = q, wp.X_WG.translation()
+    return tuple(waypoints), tuple(solutions)
+
+
+def _append(trajectory, waypoints, solutions, index, timing, until=None, release=True, vias=None):
+    """Append the moves to ``solutions``, up to and including phase ``until`` (all when
+    None), each gripper change after a settle. ``vias`` maps a move's index to the
+    configurations it passes through (a planned path), moved through without blending.
+    With ``release`` False the fingers keep their command at ``until``."""
+    stop = replace(timing, blend=0.0)
+    for k, (wp, q) in enumerate(zip(waypoints, solutions, strict=True)):
+        path = (vias or {}).get(k)
+        if path is not None:
+            for via in path:
+                trajectory.move(via, wp.phase, index, stop)
+            trajectory.move(q, wp.phase, index, stop)
+        else:
+            trajectory.move(q, wp.phase, index, timing)
+        want = GRIPPER_OPEN if wp.gripper == "open" else GRIPPER_CLOSED
+        if want != trajectory.end_gripper:
+            trajectory.hold(timing.settle_time, wp.phase, index)
+            if release or wp.phase != until:
+                trajectory.hold(timing.gripper_time, wp.phase, index, gripper=want)
+        if wp.phase == until:
+            break
+
+
 def _plan(
     action, index, world, ik, trajectory, timing, params, after=None, until=None, release=True
 ):
     """IK for the waypoints after phase ``after`` (all when None); moves appended up to
     and including phase ``until`` (all when None). With ``release`` False the fingers
     keep their command at ``until`` (only the settle is held)."""
-    waypoints = waypoints_for(action, world, params)
-    if after is not None:
-        waypoints = waypoints[[w.phase for w in waypoints].index(after) + 1 :]
-    solutions = []
-    q_seed = trajectory.end_q
-    p_seed = world.X_WG.translation()  # where the hand is at q_seed
-    appending = True
+    waypoints, solutions = _solve_all(action, index, world, ik, trajectory.end_q, params, after)
+    _append(trajectory, waypoints, solutions, index, timing, until, release)
+    return waypoints, solutions
+
+
+class Infeasible(IkError):
+    """No motion does the action where the world is now: no IK, no free grasp or place
+    pose under any turn of the hand, or no free path within the planner's budget."""
+
+
+@dataclass
+class Planning:
+    """What chooses motions that hit nothing (a ``motion.planner`` other than ``straight``)."""
+
+    space: FreeSpace
+    planner: object  # has name and plan(query) (cake_drake.geometric.planners)
+    spec: str
+    seed: int  # the scenario's
+    limits: tuple[np.ndarray, np.ndarray]  # the arm's joint limits (lower, upper)
+    budget_s: float = QUERY_BUDGET_S
+    #: One entry per planner query: (action index, phase, ms, path length / straight).
+    queries: list = field(default_factory=list)
+
+
+#: Quarter turns of the hand tried at a grasp or a place, today's first.
+GRASP_TURNS = (0, 1)
+#: The phases whose end pose touches the action's own cubes.
+CONTACT_PHASES = ("grasp", "place")
+
+
+def _move_worlds(action, world: WorldView, waypoints, params):
+    """For each move of the action, how :meth:`FreeSpace.set` is called: the cube poses,
+    finger opening, the held cube and its grasp, the cubes the robot may touch.
+
+    The cube rides in the hand from the grasp (a pick) or from the start (a place) until the
+    fingers open, and stays where the place sets it; the action's own cubes may be touched
+    on the moves down to them and up from them (not on the transits at the safe height)."""
+    block = action.args[0]
+    poses = dict(world.cube_poses)
+    if action.name in PLACE_ACTIONS:
+        held, X_GB = block, world.X_WG.inverse() @ world.cube_poses[block]
+    else:
+        held, X_GB = None, None
+    out = []
     for wp in waypoints:
-        if wp.phase in TRANSIT_PHASES:
-            q_seed = _swing_seed(q_seed, p_seed, wp.X_WG.translation())
-        q = _solve(ik, wp, q_seed, action, index)
-        solutions.append(q)
-        if appending:
-            trajectory.move(q, wp.phase, index, timing)
-            want = GRIPPER_OPEN if wp.gripper == "open" else GRIPPER_CLOSED
-            if want != trajectory.end_gripper:
-                trajectory.hold(timing.settle_time, wp.phase, index)
-                if release or wp.phase != until:
-                    trajectory.hold(timing.gripper_time, wp.phase, index, gripper=want)
-        appending = appending and wp.phase != until
-        q_seed, p_seed = q, wp.X_WG.translation()
-    return tuple(waypoints), tuple(solutions)
+        touching = () if wp.phase in TRANSIT_PHASES else tuple(action.args)
+        fingers = FINGERS_OPEN if held is None else FINGERS_HOLDING
+        out.append((dict(poses), fingers, held, X_GB, touching))
+        if wp.gripper == "closed" and held is None:
+            held, X_GB = block, wp.X_WG.inverse() @ poses[block]
+        elif wp.gripper == "open" and held is not None:
+            poses[block] = wp.X_WG @ X_GB
+            held = X_GB = None
+    return out
+
+
+def _seed(planning: Planning, index: int, variant: int, move: int) -> int:
+    """The seed of one query: from the scenario's seed, the action, the variant and the
+    move; never 0 (OMPL's "pick one yourself")."""
+    text = f"{planning.seed}/{index}/{variant}/{move}".encode()
+    return zlib.crc32(text) % (2**31 - 1) + 1
+
+
+def _planned(action, index, world, ik, start, timing, params, until, planning: Planning):
+    """The first collision-free motion of ``action``: the hand at today's yaw, then turned
+    a quarter; for a put-down, each free table slot in turn. The grasp or place pose must be
+    free; a blocked move is planned (:func:`_path`). Returns (Motion, trajectory), or
+    raises :class:`Infeasible` with every variant's reason."""
+    slots = [None]
+    if action.name == "put-down":
+        slots = [(x, y) for x, y in world.slots if _slot_free(world, action.args[0], params, x, y)]
+    reasons = []
+    variant = 0
+    for slot in slots:
+        view = world if slot is None else replace(world, slots=(slot,))
+        for turn in GRASP_TURNS:
+            variant += 1
+            p = replace(params, yaw_turns=params.yaw_turns + turn)
+            where = f"hand turned {turn}/4" + ("" if slot is None else f", slot {slot}")
+            try:
+                waypoints, solutions = _solve_all(action, index, view, ik, start.end_q, p)
+            except IkError as e:
+                reasons.append(f"{where}: {str(e).split(': ', 1)[-1]}")
+                continue
+            worlds = _move_worlds(action, view, waypoints, p)
+            vias, why = {}, None
+            q0 = start.end_q
+            for k, (wp, q1, w) in enumerate(zip(waypoints, solutions, worlds, strict=True)):
+                planning.space.set(*w)
+                if wp.phase in CONTACT_PHASES and not planning.space.is_free(q1):
+                    hit = planning.space.nearest_hit(q1)
+                    why = f"{where}: the {wp.phase} pose is not free" + (
+                        f" ({hit[0]} {hit[2] * 1000:.1f} mm from {hit[1]})" if hit else ""
+                    )
+                    break
+                if not planning.space.edge_is_free(q0, q1):
+                    seed = _seed(planning, index, variant, k)
+                    path = _path(planning, index, wp.phase, q0, q1, seed)
+                    if isinstance(path, str):
+                        why = f"{where}: {wp.phase} move: {path}"
+                        break
+                    vias[k] = path[1:-1]
+                q0 = q1
+            if why is not None:
+                reasons.append(why)
+                continue
+            trajectory = start.copy()
+            _append(trajectory, waypoints, solutions, index, timing, until, vias=vias)
+            motion = Motion(waypoints, solutions, (), p.transit_clearance, p, until)
+            return motion, trajectory
+    if not slots:
+        reasons.append("every table slot is taken")
+    why = "; ".join(reasons)
+    raise Infeasible(f"action {index + 1} {action}: no collision-free motion ({why})")
+
+
+def _slot_free(world: WorldView, held: str, params: WaypointParams, x: float, y: float) -> bool:
+    return all(
+        np.hypot(X.translation()[0] - x, X.translation()[1] - y) > params.slot_clearance
+        for n, X in world.cube_poses.items()
+        if n != held
+    )
+
+
+def _path(planning: Planning, index: int, phase: str, q0, q1, seed: int):
+    """A free path q0 -> q1 from the planner (its every segment checked), or the reason."""
+    space = planning.space
+    lower, upper = planning.limits
+    query = MoveQuery(np.array(q0), np.array(q1), space.is_free, lower, upper, seed,
+                      planning.budget_s, space.resolution)  # fmt: skip
+    t0 = time.perf_counter()
+    answer = ask(planning.planner, planning.spec, query)
+    ms = (time.perf_counter() - t0) * 1000
+    if isinstance(answer, str):
+        planning.queries.append((index, phase, ms, None))
+        return answer
+    for a, b in zip(answer[:-1], answer[1:], strict=True):
+        if not space.edge_is_free(a, b):
+            raise PluginError(
+                f"motion planner {planning.spec!r} returned a path through a collision "
+                f"(action {index + 1}, {phase} move)",
+                DURING,
+            )
+    length = float(np.sum(np.linalg.norm(np.diff(answer, axis=0), axis=1)))
+    planning.queries.append((index, phase, ms, length / max(np.linalg.norm(q1 - q0), 1e-9)))
+    return answer
 
 
 def solve_action(
@@ -140,8 +314,13 @@ def solve_action(
     checker: CollisionChecker | None = None,
     avoid_collisions: bool = False,
     refine: bool = False,
+    planning: Planning | None = None,
 ) -> Motion:
     """Append ``action``'s motion to ``trajectory``: waypoints, IK, timed moves.
+
+    With ``planning`` (a motion planner other than ``straight``) the motion is chosen
+    among collision-free ones instead (:func:`_planned`): an action with none raises
+    :class:`Infeasible`.
 
     With ``refine``, a place action is planned whole but moved only up to
     :data:`REFINE_AFTER`; ``Motion.pending_after`` then says that the rest is to be
@@ -160,6 +339,14 @@ def solve_action(
     """
     start = trajectory.copy()
     until = REFINE_AFTER if refine and action.name in PLACE_ACTIONS else None
+    if planning is not None:
+        motion, planned = _planned(action, index, world, ik, start, timing, params, until, planning)
+        if checker is not None:  # the report's own, independent check of what will run
+            found = action_collisions(checker, action, world, motion.waypoints, start.end_q,
+                                      motion.solutions)  # fmt: skip
+            motion = replace(motion, collisions=tuple(found))
+        trajectory.assign(planned)
+        return motion
     variants = [(0.0, 0)]
     if checker is not None and avoid_collisions:
         variants = [(dz, turn) for dz in AVOID_RAISES for turn in AVOID_TURNS]

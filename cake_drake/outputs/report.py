@@ -99,6 +99,27 @@ def summary(result) -> dict:
         if cake.ik and cake.ik.times_ms
         else None,
         "policy": _policy(cake.reference.policy),
+        "motion_planner": _motion_planner(scenario, cake.reference.waypoint_ik),
+    }
+
+
+def _motion_planner(scenario, waypoint_ik) -> dict | None:
+    """The motion planner's queries (blocked moves only): how many, how long, how much
+    longer than the blocked straight line; None for a run that does not plan motion."""
+    planning = getattr(waypoint_ik, "planning", None)
+    if planning is None:
+        return None
+    ms = [q[2] for q in planning.queries]
+    ratios = [q[3] for q in planning.queries if q[3] is not None]
+    return {
+        "name": scenario.motion.planner,
+        "queries": len(ms),
+        "failed": sum(q[3] is None for q in planning.queries),
+        "median_ms": round(float(np.median(ms)), 2) if ms else None,
+        "p90_ms": round(float(np.percentile(ms, 90)), 2) if ms else None,
+        "path_over_straight": round(float(np.median(ratios)), 3) if ratios else None,
+        "collision_checks": planning.space.checks,
+        "padding_m": planning.space.padding,
     }
 
 

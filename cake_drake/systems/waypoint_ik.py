@@ -13,7 +13,7 @@ from pydrake.systems.framework import LeafSystem
 from cake_drake.errors import CakeDrakeError, ExecutionError
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import IkSolver
-from cake_drake.geometric.solve import refine_action, release_action, solve_action
+from cake_drake.geometric.solve import Planning, refine_action, release_action, solve_action
 from cake_drake.geometric.trajectory import JointLimits, JointTrajectory, Timing
 from cake_drake.geometric.waypoints import PICK_ACTIONS, WaypointParams, WorldView
 from cake_drake.symbolic import GroundAction
@@ -59,6 +59,8 @@ class MotionSettings:
     checker: CollisionChecker | None = None  # report moves that sweep through cubes
     avoid_collisions: bool = False
     meaning: Callable[[GroundAction], GroundAction] = _as_is
+    #: Motions chosen free and blocked moves planned (a planner other than ``straight``).
+    planning: Planning | None = None
 
 
 @dataclass(frozen=True)
@@ -157,6 +159,11 @@ class WaypointIk(LeafSystem):
         """What the planned moves are checked with, if anything."""
         return self._motion.checker
 
+    @property
+    def planning(self) -> Planning | None:
+        """The motion planner's settings and record of queries, if one plans."""
+        return self._motion.planning
+
     def progress(self, context) -> Progress:
         return context.get_abstract_state(self._state_index).get_value()
 
@@ -223,6 +230,7 @@ class WaypointIk(LeafSystem):
                 m.checker,
                 m.avoid_collisions,
                 refine=True,
+                planning=m.planning,
             )
             found = tuple(named(w) for w in motion.warnings(cmd.index, action))
             pending = (
