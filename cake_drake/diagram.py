@@ -175,6 +175,7 @@ def _add_reference(
         motion.avoid_collisions,
         meaning=lambda action: roles.classify(action).canonical(),
         planning=planning,
+        feedback=source.HasInputPort("infeasible"),
     )
     waypoint_ik = builder.AddNamedSystem(
         "waypoint_ik",
@@ -194,6 +195,8 @@ def _add_reference(
     ]
     if source.HasInputPort("body_poses"):
         wires.append((plant.get_body_poses_output_port(), source.GetInputPort("body_poses")))
+    if source.HasInputPort("infeasible"):
+        wires.append((waypoint_ik.GetOutputPort("infeasible"), source.GetInputPort("infeasible")))
     if source.HasInputPort("hand_state"):
         wires.append((plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state")))
     for out_port, in_port in wires:

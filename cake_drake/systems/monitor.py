@@ -13,9 +13,10 @@ from pydrake.systems.framework import BasicVector, LeafSystem
 
 from cake_drake.errors import CakeDrakeError
 from cake_drake.symbolic import GroundAction, Plan, Problem, fact_str, validate_plan
+from cake_drake.symbolic.grounding import apply_action, ground_all
 from cake_drake.symbolic.kernels import kernels, latest_kernel
 from cake_drake.symbolic.roles import blocksworld_roles
-from cake_drake.systems.plan_source import ActionCommand
+from cake_drake.systems.plan_source import ActionCommand, Refusal
 from cake_drake.world.facts import read_facts
 
 #: How long (s) the monitor waits for a disturbed world to come to rest before it judges.
@@ -37,9 +38,23 @@ class MonitorState:
     events: tuple[dict, ...] = ()
     error: str | None = None
     waiting_since: float | None = None  # the world was not at rest: waiting since then
+    #: (measured facts, action) pairs the geometric layer refused: not planned again there.
+    forbidden: frozenset = frozenset()
 
     def __deepcopy__(self, memo):
         return self
+
+
+def _meets_forbidden(problem: Problem, actions, forbidden) -> bool:
+    """Whether the plan takes an action in a state where it is forbidden."""
+    if not forbidden:
+        return False
+    state = problem.init
+    for a in actions:
+        if (state, a) in forbidden:
+            return True
+        state = apply_action(problem, state, a)
+    return False
 
 
 class ExecutionMonitor(LeafSystem):
@@ -54,6 +69,7 @@ class ExecutionMonitor(LeafSystem):
         - actions_done
         - body_poses
         - hand_state
+        - infeasible
         output_ports:
         - action
 
@@ -61,9 +77,12 @@ class ExecutionMonitor(LeafSystem):
     frame's pose it tells a cube really in the hand from one that slipped. ``action`` is
     an :class:`ActionCommand` for the next action; while a finished action is being
     checked it carries an index behind ``actions_done``, so nothing starts and the run is
-    not taken as finished. At most ``max_replans`` replans; an unrecoverable world (a
-    cube off the table, the budget spent, no plan from the measured facts) stops the run
-    with :meth:`error` naming the fact.
+    not taken as finished. ``infeasible`` (optional) is the geometric layer's
+    :class:`Refusal` of an action it cannot do where the world is now: that action is
+    forbidden in that state and the rest replanned around it (TAMP at its simplest: the
+    plan hears of geometry before the arm moves). At most ``max_replans`` replans; an
+    unrecoverable world (a cube off the table, the budget spent, no plan from the measured
+    facts) stops the run with :meth:`error` naming the fact.
     """
 
     def __init__(
@@ -92,6 +111,9 @@ class ExecutionMonitor(LeafSystem):
             "body_poses", AbstractValue.Make([RigidTransform()])
         )
         self._hand_port = self.DeclareVectorInputPort("hand_state", BasicVector(4))
+        self._refusal_port = self.DeclareAbstractInputPort(
+            "infeasible", AbstractValue.Make(Refusal())
+        )
         initial = MonitorState(tuple(actions))
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
         self.DeclareAbstractOutputPort(
@@ -151,6 +173,11 @@ class ExecutionMonitor(LeafSystem):
     def _update(self, context, state) -> None:
         s = self.state(context)
         done = int(round(self._done_port.Eval(context)[0]))
+        if s.error is None and s.seen == done and self._refusal_port.HasValue(context):
+            refusal: Refusal = self._refusal_port.Eval(context)
+            if refusal.index == done and s.pos < len(s.plan) and s.plan[s.pos] == refusal.action:
+                self._set(state, self._avoid(s, context, done, refusal))
+                return
         if s.error is not None or s.seen == done:
             return
         t = context.get_time()
@@ -211,6 +238,63 @@ class ExecutionMonitor(LeafSystem):
             )
         event["new_plan"] = [str(a) for a in actions]
         return replace(s, plan=actions, pos=0, replans=s.replans + 1, events=s.events + (event,))
+
+    def _avoid(self, s: MonitorState, context, done: int, refusal: Refusal) -> MonitorState:
+        """Replan from the measured facts with ``refusal.action`` forbidden where the world
+        is now (the geometric layer found no motion for it)."""
+        facts, _, _ = self.measured_facts(context)
+        after = str(s.emitted[done - 1]) if 0 < done <= len(s.emitted) else None
+        event = {
+            "time_s": round(context.get_time(), 3),
+            "after_action": after,
+            "kind": "infeasible",
+            "action": str(refusal.action),
+            "reason": refusal.reason,
+        }
+        forbidden = s.forbidden | {(facts, refusal.action)}
+        s = replace(s, events=s.events + (event,), forbidden=forbidden)
+        stop = f"the world cannot be recovered: {refusal.reason}"
+        if s.replans >= self._max_replans:
+            return replace(s, error=f"{stop}; the replan budget ({self._max_replans}) is spent")
+        problem = dataclasses.replace(self._problem, init=frozenset(facts))
+        try:
+            actions = self._plan_avoiding(problem, forbidden)
+        except CakeDrakeError as e:
+            return replace(s, error=f"{stop}; no plan avoids it ({e})")
+        event["new_plan"] = [str(a) for a in actions]
+        emitted = s.emitted[:done] + actions[:1]
+        return replace(s, plan=actions, pos=0, replans=s.replans + 1, emitted=emitted)
+
+    def _plan_avoiding(self, problem: Problem, forbidden) -> tuple[GroundAction, ...]:
+        """A valid plan from ``problem.init`` that never takes an action where it is
+        forbidden: the planner's own, else the shortest of (an allowed first action, then
+        the planner's plan from where it leads)."""
+
+        def plan(p: Problem) -> tuple[GroundAction, ...] | None:
+            result = self._planner(p, None)
+            actions = tuple(result.actions if isinstance(result, Plan) else result)
+            check = validate_plan(p, actions)
+            if not check.ok:
+                raise CakeDrakeError(check.message)
+            return None if _meets_forbidden(p, actions, forbidden) else actions
+
+        state = problem.init
+        first = plan(problem)
+        if first is not None:
+            return first
+        best = None
+        for op in ground_all(problem):
+            if (state, op.action) in forbidden or not op.applicable(state):
+                continue
+            try:
+                rest = plan(dataclasses.replace(problem, init=op.apply(state)))
+            except CakeDrakeError:
+                continue
+            if rest is not None and (best is None or len(rest) + 1 < len(best)):
+                best = (op.action, *rest)
+        if best is None:
+            raise CakeDrakeError("each plan found takes it where it was refused")
+        return best
 
     def _event(self, t, done, kind, s: MonitorState, expected, facts) -> dict:
         after = str(s.emitted[done - 1]) if 0 < done <= len(s.emitted) else None

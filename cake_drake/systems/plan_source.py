@@ -22,6 +22,20 @@ class ActionCommand:
         return self
 
 
+@dataclass(frozen=True)
+class Refusal:
+    """The geometric layer's answer that an action cannot be done where the world is now
+    (``index`` -1: none). An action source with an ``infeasible`` input port hears it and
+    may give another action at the same index; without one, the run stops."""
+
+    index: int = -1
+    action: GroundAction | None = None
+    reason: str = ""
+
+    def __deepcopy__(self, memo):
+        return self
+
+
 class PlanSource(LeafSystem):
     """Emits the current ground action of a plan and advances as actions are reported done.
 

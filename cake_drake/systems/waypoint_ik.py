@@ -10,14 +10,14 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
-from cake_drake.errors import CakeDrakeError, ExecutionError
+from cake_drake.errors import CakeDrakeError, ExecutionError, IkError
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import IkSolver
 from cake_drake.geometric.solve import Planning, refine_action, release_action, solve_action
 from cake_drake.geometric.trajectory import JointLimits, JointTrajectory, Timing
 from cake_drake.geometric.waypoints import PICK_ACTIONS, WaypointParams, WorldView
 from cake_drake.symbolic import GroundAction
-from cake_drake.systems.plan_source import ActionCommand
+from cake_drake.systems.plan_source import ActionCommand, Refusal
 
 #: Sizes of the named output ports every reference source has (``WaypointIk`` and the
 #: recorded replay alike).
@@ -61,6 +61,9 @@ class MotionSettings:
     meaning: Callable[[GroundAction], GroundAction] = _as_is
     #: Motions chosen free and blocked moves planned (a planner other than ``straight``).
     planning: Planning | None = None
+    #: The action source listens on ``infeasible``: an action that cannot be done is
+    #: refused (:class:`Refusal`) instead of stopping the run.
+    feedback: bool = False
 
 
 @dataclass(frozen=True)
@@ -78,6 +81,7 @@ class Progress:
     pending: tuple[GroundAction, str, WaypointParams, RigidTransform | None] | None = None
     error: str | None = None
     warnings: tuple[str, ...] = ()  # collisions found along the planned moves
+    refused: Refusal = Refusal()  # the last action found infeasible before it started
 
     def __deepcopy__(self, memo):
         return self
@@ -98,6 +102,7 @@ class WaypointIk(LeafSystem):
         - finger_state
         - actions_done
         - labels
+        - infeasible
 
     When ``action`` names an action it has not started, it reads the cube and gripper
     poses from ``body_poses`` (the plant's), computes the waypoints, solves IK and
@@ -140,6 +145,12 @@ class WaypointIk(LeafSystem):
         for name, value in self._reference(initial, 0.0).items():
             self._groups[name] = self.DeclareDiscreteState(value)
             self.DeclareStateOutputPort(name, self._groups[name])
+        self.DeclareAbstractOutputPort(
+            "infeasible",
+            lambda: AbstractValue.Make(Refusal()),
+            lambda context, out: out.set_value(self.progress(context).refused),
+            prerequisites_of_calc={self.abstract_state_ticket(self._state_index)},
+        )
         self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._update)
 
     @staticmethod
@@ -206,6 +217,8 @@ class WaypointIk(LeafSystem):
             )
         if cmd.action is None or cmd.index != prog.done:
             return prog
+        if prog.refused.index == cmd.index and prog.refused.action == cmd.action:
+            return prog  # refused: the source decides what comes instead
         traj = prog.trajectory.copy()
         traj.resume_at(t, "idle", -1)
         m = self._motion
@@ -243,7 +256,12 @@ class WaypointIk(LeafSystem):
                 held=held,
                 pending=pending,
                 warnings=prog.warnings + found,
+                refused=Refusal(),
             )
+        except IkError as e:  # before the arm moved: the symbolic layer may choose again
+            if m.feedback:
+                return replace(prog, refused=Refusal(cmd.index, cmd.action, named(str(e))))
+            return replace(prog, working=-1, error=named(str(e)))
         except ExecutionError as e:
             return replace(prog, working=-1, error=named(str(e)))
 
