@@ -8,7 +8,12 @@ knocked cube shows as one); motion-planner queries (blocked moves), their time (
 p90) and path length against the blocked straight line; the simulated run's wall time
 against ``straight``.
 
-    python benchmarks/motion.py [--seeds 10]
+(b) blocked moves: seeded pairs of hand poses just above two towers of a crowded table
+    (towers of 1 to 3 cubes), kept when both ends are free and the straight move between
+    them is not; each planner's success, time per query (median, p90, wall clock of this
+    process) and path length against the straight line.
+
+    python benchmarks/motion.py [--seeds 10] [--queries 50]
 """
 
 from __future__ import annotations
@@ -19,13 +24,19 @@ import time
 from pathlib import Path
 
 import numpy as np
+from pydrake.math import RigidTransform
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from machine import machine  # noqa: E402 - benchmarks/machine.py
 
+from cake_drake.geometric.free_space import FreeSpace  # noqa: E402
+from cake_drake.geometric.ik import Kinematics, make_solver  # noqa: E402
+from cake_drake.geometric.planners import MoveQuery, ask, make_planner  # noqa: E402
+from cake_drake.geometric.waypoints import gripper_down  # noqa: E402
 from cake_drake.pipeline import run  # noqa: E402
 from cake_drake.scenario import Generate, Scenario  # noqa: E402
+from cake_drake.world.scene import Q_HOME, WorldConfig  # noqa: E402
 
 
 def crowded(problem: Generate | None, planner: str) -> Scenario:
@@ -38,15 +49,50 @@ def crowded(problem: Generate | None, planner: str) -> Scenario:
     return s
 
 
+def blocked_queries(count: int, seed: int = 0):
+    """(space, queries): ``count`` blocked moves on a crowded table (see the module)."""
+    rng = np.random.default_rng(seed)
+    world = WorldConfig(slot_radius=0.4, slot_spacing=0.104, slot_spacing_max=0.104)
+    slots = world.slots_for(6)
+    poses, tops, n = {}, [], 0
+    for x, y in slots:
+        height = int(rng.integers(1, 4))
+        for level in range(height):
+            poses[f"c{n}"] = RigidTransform([x, y, 0.02 + 0.04 * level])
+            n += 1
+        tops.append(0.04 * height)
+    space = FreeSpace(sorted(poses))
+    space.set(poses, 0.04)
+    kin = Kinematics()
+    ik = make_solver("drake", kin, 0)
+    queries = []
+    while len(queries) < count:
+        i, j = rng.choice(len(slots), 2, replace=False)
+        ends = []
+        for k in (i, j):
+            z = tops[k] + 0.02 + rng.uniform(0.0, 0.04)
+            yaw = rng.uniform(-np.pi / 4, np.pi / 4)
+            ends.append(ik.solve(RigidTransform(gripper_down(yaw), [*slots[k], z]), Q_HOME))
+        q0, q1 = ends
+        if q0 is None or q1 is None or not (space.is_free(q0) and space.is_free(q1)):
+            continue
+        if space.edge_is_free(q0, q1):
+            continue
+        seed = len(queries) + 1
+        queries.append(MoveQuery(q0, q1, space.is_free, kin.lower, kin.upper, seed, 2.0, 0.02))
+    return space, queries
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, default=10, help="generated problems per size")
+    parser.add_argument("--seeds", type=int, default=10, help="generated problems")
+    parser.add_argument("--queries", type=int, default=50, help="blocked moves in (b)")
     args = parser.parse_args()
     problems = [None] + [
         Generate(blocks=n, seed=k) for n in (4, 6, 8) for k in range(args.seeds // 3 + 1)
     ][: args.seeds]
     print(machine())
-    print(f"crowded table, problem_5 and {len(problems) - 1} generated problems of 4 to 8 blocks")
+    print(f"(a) crowded table, problem_5 and {len(problems) - 1} generated problems of 4-8 blocks")
     header = (
         f"{'planner':<13}{'built':>7}{'collisions':>12}{'disagreements':>15}{'queries':>9}"
         f"{'median ms':>11}{'p90 ms':>8}{'path/line':>11}{'wall vs straight':>18}"
@@ -76,6 +122,25 @@ def main() -> None:
         print(
             f"{planner:<13}{f'{built}/{len(problems)}':>7}{hits:>12}{disagreements:>15}"
             f"{len(ms):>9}{med:>11}{p90:>8}{ratio:>11}{rel:>17.2f}x"
+        )
+
+    _, queries = blocked_queries(args.queries)
+    print(f"(b) {len(queries)} blocked moves between crowded towers")
+    print(f"{'planner':<16}{'solved':>8}{'median ms':>11}{'p90 ms':>8}{'path/line':>11}")
+    for spec in ("rrt-connect", "examples.via_point_planner:make"):
+        planner = make_planner(spec)
+        ms, ratios = [], []
+        for q in queries:
+            t0 = time.perf_counter()
+            path = ask(planner, spec, q)
+            ms.append((time.perf_counter() - t0) * 1000)
+            if not isinstance(path, str):
+                length = np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))
+                ratios.append(length / np.linalg.norm(q.goal - q.start))
+        name = spec.split(".")[-1].split(":")[0]
+        print(
+            f"{name:<16}{f'{len(ratios)}/{len(queries)}':>8}{np.median(ms):>11.1f}"
+            f"{np.percentile(ms, 90):>8.1f}{np.median(ratios):>11.2f}"
         )
 
 

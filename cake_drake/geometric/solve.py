@@ -24,6 +24,7 @@ from cake_drake.geometric.planners import QUERY_BUDGET_S, MoveQuery, ask
 from cake_drake.geometric.trajectory import (
     GRIPPER_CLOSED,
     GRIPPER_OPEN,
+    PHASE_NAMES,
     JointTrajectory,
     Timing,
 )
@@ -126,11 +127,22 @@ def _solve_all(action, index, world, ik, q_start, params, after=None):
     return tuple(waypoints), tuple(solutions)
 
 
-def _append(trajectory, waypoints, solutions, index, timing, until=None, release=True, vias=None):
+def _append(
+    trajectory,
+    waypoints,
+    solutions,
+    index,
+    timing,
+    until=None,
+    release=True,
+    vias=None,
+    stops=frozenset(),
+):
     """Append the moves to ``solutions``, up to and including phase ``until`` (all when
     None), each gripper change after a settle. ``vias`` maps a move's index to the
-    configurations it passes through (a planned path), moved through without blending.
-    With ``release`` False the fingers keep their command at ``until``."""
+    configurations it passes through (a planned path), moved through without blending;
+    the moves in ``stops`` do not blend into the one before either. With ``release``
+    False the fingers keep their command at ``until``."""
     stop = replace(timing, blend=0.0)
     for k, (wp, q) in enumerate(zip(waypoints, solutions, strict=True)):
         path = (vias or {}).get(k)
@@ -139,7 +151,7 @@ def _append(trajectory, waypoints, solutions, index, timing, until=None, release
                 trajectory.move(via, wp.phase, index, stop)
             trajectory.move(q, wp.phase, index, stop)
         else:
-            trajectory.move(q, wp.phase, index, timing)
+            trajectory.move(q, wp.phase, index, stop if k in stops else timing)
         want = GRIPPER_OPEN if wp.gripper == "open" else GRIPPER_CLOSED
         if want != trajectory.end_gripper:
             trajectory.hold(timing.settle_time, wp.phase, index)
@@ -261,14 +273,45 @@ def _planned(action, index, world, ik, start, timing, params, until, planning: P
             if why is not None:
                 reasons.append(why)
                 continue
-            trajectory = start.copy()
-            _append(trajectory, waypoints, solutions, index, timing, until, vias=vias)
+            stops: set[int] = set()
+            while True:  # a blend cuts a corner: re-checked, and a stop where it hits
+                trajectory = start.copy()
+                _append(trajectory, waypoints, solutions, index, timing, until, True, vias,
+                        frozenset(stops))  # fmt: skip
+                hits = _blend_hits(planning.space, trajectory, len(start.segments), waypoints,
+                                   worlds) - stops  # fmt: skip
+                if not hits:
+                    break
+                stops |= hits
             motion = Motion(waypoints, solutions, (), p.transit_clearance, p, until)
             return motion, trajectory
     if not slots:
         reasons.append("every table slot is taken")
     why = "; ".join(reasons)
     raise Infeasible(f"action {index + 1} {action}: no collision-free motion ({why})")
+
+
+#: s between the configurations checked where two moves blend.
+BLEND_CHECK_STEP = 0.005
+
+
+def _blend_hits(space, trajectory, first: int, waypoints, worlds) -> set[int]:
+    """The moves (by waypoint index) whose blend into the move before them is not free:
+    the blended corner leaves the two straight lines that were checked."""
+    phases = {PHASE_NAMES.index(w.phase): k for k, w in enumerate(waypoints)}
+    segments = trajectory.segments
+    hits = set()
+    for i in range(max(first, 1), len(segments)):
+        seg, prev = segments[i], segments[i - 1]
+        if not (seg.moves and prev.moves and seg.t0 < prev.end - 1e-9):
+            continue
+        k = phases[seg.phase]
+        space.set(*worlds[k])
+        for t in np.arange(seg.t0, prev.end, BLEND_CHECK_STEP):
+            if not space.is_free(trajectory.at(float(t))[0]):
+                hits.add(k)
+                break
+    return hits
 
 
 def _slot_free(world: WorldView, held: str, params: WaypointParams, x: float, y: float) -> bool:
