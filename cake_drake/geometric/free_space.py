@@ -20,7 +20,7 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 from pydrake.common import Parallelism
-from pydrake.geometry import Box, CollisionFilterDeclaration, GeometrySet
+from pydrake.geometry import Box
 from pydrake.math import RigidTransform
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 
@@ -52,20 +52,9 @@ class FreeSpace:
             list(blocks),
             WorldConfig(time_step=0.0),
             plant_and_scene_graph=(builder.plant(), builder.scene_graph()),
+            cube_boxes=True,  # the spheres a cube stands on lie within its box
         )
         self.scene = scene
-        # The simulation lets the robot touch a cube's box but not its corner spheres
-        # (they lie within it); the checker wants one rule per pair of bodies: all of it.
-        plant, scene_graph = builder.plant(), builder.scene_graph()
-        robot, cubes = GeometrySet(), GeometrySet()
-        for instance, into in [(scene.arm, robot), (scene.hand, robot)] + [
-            (i, cubes) for i in scene.cubes.values()
-        ]:
-            for b in plant.GetBodyIndices(instance):
-                into.Add(plant.GetCollisionGeometriesForBody(plant.get_body(b)))
-        scene_graph.collision_filter_manager().Apply(
-            CollisionFilterDeclaration().AllowBetween(robot, cubes)
-        )
         quiet = logging.getLogger("drake")  # it announces the contexts it allocates
         level = quiet.level
         quiet.setLevel(logging.WARNING)

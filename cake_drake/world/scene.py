@@ -278,6 +278,7 @@ def add_world(
     arm_gains: tuple[Sequence[float], Sequence[float]] | None = None,
     initial_poses: Mapping[str, RigidTransform] | None = None,
     plant_and_scene_graph: tuple[MultibodyPlant, SceneGraph] | None = None,
+    cube_boxes: bool = False,
 ) -> Scene:
     """Add the plant (table, Panda, one cube per block name) and SceneGraph to ``builder``
     (or fill ``plant_and_scene_graph``, a pair already in it, e.g. a ``RobotDiagramBuilder``'s).
@@ -287,6 +288,8 @@ def add_world(
     the finger actuators are on the plant's implicit PD (stable at large time steps), and
     so are the arm's when ``arm_gains`` = (kp, kd) per joint is given (a controller that
     uses the built-in PD); the robot's own geometries never collide with each other.
+    With ``cube_boxes`` each cube is its bare box (no support spheres, no colour), as
+    collision checking for motion planning wants it (:mod:`cake_drake.geometric.free_space`).
     """
     if plant_and_scene_graph is None:
         plant_config = MultibodyPlantConfig(
@@ -303,10 +306,13 @@ def add_world(
     arm = plant.GetModelInstanceByName("panda")
     hand = plant.GetModelInstanceByName("hand")
     _add_grasp_frame(plant, hand)
-    parser.AddModelsFromString(cube_directives(blocks, initial_poses), "dmd.yaml")
-    cubes = {name: plant.GetModelInstanceByName(f"block_{name}") for name in blocks}
-    for instance in cubes.values():
-        _add_side_supports(plant, plant.GetBodyByName("cube", instance))
+    if cube_boxes:
+        cubes = {name: _add_box_cube(plant, name) for name in blocks}
+    else:
+        parser.AddModelsFromString(cube_directives(blocks, initial_poses), "dmd.yaml")
+        cubes = {name: plant.GetModelInstanceByName(f"block_{name}") for name in blocks}
+        for instance in cubes.values():
+            _add_side_supports(plant, plant.GetBodyByName("cube", instance))
     for joint_name in FINGER_JOINTS:
         actuator = plant.GetJointActuatorByName(f"{joint_name}_motor", hand)
         actuator.set_controller_gains(PdControllerGains(p=config.finger_kp, d=config.finger_kd))
@@ -315,10 +321,25 @@ def add_world(
             actuator = plant.GetJointActuatorByName(f"panda_motor{i}", arm)
             actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
     plant.Finalize()
-    _paint_cubes(plant, scene_graph, cubes)
     robot = _filter_robot_collisions(plant, scene_graph, arm, hand)
-    _filter_cube_collisions(plant, scene_graph, cubes, robot)
+    if not cube_boxes:
+        _paint_cubes(plant, scene_graph, cubes)
+        _filter_cube_collisions(plant, scene_graph, cubes, robot)
     return Scene(plant, scene_graph, arm, hand, cubes)
+
+
+def _add_box_cube(plant: MultibodyPlant, name: str) -> ModelInstanceIndex:
+    """A free cube ``block_<name>`` that is only its box (see :func:`add_world`)."""
+    from pydrake.geometry import Box
+    from pydrake.multibody.plant import CoulombFriction
+    from pydrake.multibody.tree import SpatialInertia
+
+    instance = plant.AddModelInstance(f"block_{name}")
+    inertia = SpatialInertia.SolidBoxWithMass(0.08, CUBE_SIZE, CUBE_SIZE, CUBE_SIZE)
+    body = plant.AddRigidBody("cube", instance, inertia)
+    box = Box(CUBE_SIZE, CUBE_SIZE, CUBE_SIZE)
+    plant.RegisterCollisionGeometry(body, RigidTransform(), box, "box", CoulombFriction(1.0, 1.0))
+    return instance
 
 
 #: The model's eight support spheres sit 8 mm in from the edges of the bottom and top
