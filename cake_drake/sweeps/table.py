@@ -47,12 +47,13 @@ def _normalise(values: list) -> list:
     return [None if v is None else str(v) for v in values]
 
 
-def write_table(rows: list[dict], out: Path, columns: list[str]) -> list[Path]:
-    """``results.parquet`` and ``results.csv`` in ``out`` (each written whole, then moved in)."""
+def write_table(rows: list[dict], out: Path, columns: list[str], exact: bool = False) -> list[Path]:
+    """``results.parquet`` and ``results.csv`` in ``out`` (each written whole, then moved in):
+    a sweep's columns around ``columns`` (its axes), or with ``exact`` those alone."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    cols = column_order(rows, columns)
+    cols = list(columns) if exact else column_order(rows, columns)
     data = {c: _normalise([r.get(c) for r in rows]) for c in cols}
     table = pa.table({c: pa.array(v) for c, v in data.items()})
     parquet, text = out / "results.parquet", out / "results.csv"

@@ -1,0 +1,13 @@
+"""``python -m cake_drake.evaluate POLICY --suite SPEC``: a policy's success rate, measured.
+
+The argument parsing lives in :mod:`cake_drake.cli`; the library is
+:mod:`cake_drake.policy.recording`.
+"""
+
+import sys
+
+from cake_drake.cli import main_evaluate
+from cake_drake.errors import run_cli
+
+if __name__ == "__main__":
+    sys.exit(run_cli(main_evaluate))

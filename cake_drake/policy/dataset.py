@@ -1,0 +1,149 @@
+"""Episodes as a LeRobot dataset (format v3.0), written and read by ``lerobot`` itself.
+
+A dataset holds, per frame (one control period, ``fps`` = the policy rate):
+``observation.state`` (float32, 8: the seven joints in rad and the gripper's width in m),
+``observation.images.<camera>`` (video, H x W x 3, H.264 through PyAV's own FFmpeg),
+``action`` (float32, the control mode's: 8 for ``joint_position``, 7 for ``ee_delta``),
+and lerobot's own ``timestamp``, ``frame_index``, ``episode_index``, ``index`` and
+``task_index``; the task is the episode's English instruction. ``lerobot`` is an optional
+extra (``pip install 'cake_drake[lerobot]'``, about 8 GB with torch); without it the
+commands that need it are refused before any work.
+
+Nothing is fetched: the dataset is written and read under a local ``root``, with the
+Hugging Face hub set offline.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+import warnings
+from collections.abc import Iterable
+from pathlib import Path
+
+import numpy as np
+
+from cake_drake.errors import InputError
+
+LEROBOT_PIP = "pip install 'cake_drake[lerobot]'  (lerobot 0.4, with torch: about 8 GB)"
+#: The dataset's name inside its root (lerobot wants an owner/name).
+REPO_ID = "cake_drake/stack"
+STATE_NAMES = [f"joint_{i}" for i in range(1, 8)] + ["gripper_width"]
+ACTION_NAMES = {
+    "joint_position": STATE_NAMES,
+    "ee_delta": ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"],
+}
+
+
+def require_lerobot() -> None:
+    """Refuse, with the line that installs it, where ``lerobot`` is not installed."""
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")  # never the hub: local files only
+    os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+    os.environ.setdefault("HF_DATASETS_DISABLE_PROGRESS_BARS", "1")
+    try:
+        import lerobot.datasets.lerobot_dataset  # noqa: F401
+    except ImportError as e:
+        raise InputError(f"LeRobot datasets need lerobot, which is not installed ({e}): "
+                         f"{LEROBOT_PIP}") from None  # fmt: skip
+
+
+def features(control_mode: str, cameras) -> dict:
+    """lerobot's feature table for episodes in ``control_mode`` with ``cameras``."""
+    if control_mode not in ACTION_NAMES:
+        raise InputError(
+            f"control mode {control_mode!r} cannot be recorded; choose one of: "
+            f"{', '.join(ACTION_NAMES)}"
+        )
+    table = {
+        "observation.state": {"dtype": "float32", "shape": (8,), "names": STATE_NAMES},
+        "action": {
+            "dtype": "float32",
+            "shape": (len(ACTION_NAMES[control_mode]),),
+            "names": ACTION_NAMES[control_mode],
+        },
+    }
+    for c in cameras:
+        table[f"observation.images.{c.name}"] = {
+            "dtype": "video",
+            "shape": (c.height, c.width, 3),
+            "names": ["height", "width", "channels"],
+        }
+    return table
+
+
+@contextlib.contextmanager
+def _quiet():
+    """FFmpeg's encoder statistics and the datasets library's progress warnings are not the
+    user's: the process's stderr goes to a file while lerobot works, shown only if it
+    fails."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as sink, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        except BaseException:
+            os.dup2(saved, 2)
+            sink.seek(0)
+            sys.stderr.write(sink.read().decode(errors="replace")[-4000:])
+            raise
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
+def write(root: Path, episodes: Iterable, fps: float, control_mode: str, cameras) -> int:
+    """Write ``episodes`` (:class:`cake_drake.policy.rollout.Episode`, with frames) as a new
+    dataset at ``root`` (which must not exist); the number of frames written."""
+    require_lerobot()
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    with _quiet():
+        return _write(LeRobotDataset, root, episodes, fps, control_mode, cameras)
+
+
+def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  # noqa: N803
+    dataset = LeRobotDataset.create(
+        REPO_ID,
+        fps=int(round(fps)),
+        features=features(control_mode, cameras),
+        root=root,
+        robot_type="franka_panda",
+        use_videos=bool(cameras),
+        video_backend="pyav",
+        vcodec="h264",
+    )
+    frames = 0
+    for ep in episodes:
+        for k in range(len(ep.actions)):
+            frame = {
+                "observation.state": ep.states[k],
+                "action": ep.actions[k],
+                "task": ep.task,
+            }
+            for name, video in ep.images.items():
+                frame[f"observation.images.{name}"] = video[k]
+            dataset.add_frame(frame)
+        dataset.save_episode()
+        frames += len(ep.actions)
+    dataset.finalize()
+    return frames
+
+
+def read(root: Path):
+    """The dataset at ``root``, as lerobot reads it (decoding videos with PyAV)."""
+    require_lerobot()
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    with _quiet():
+        return LeRobotDataset(REPO_ID, root=root, video_backend="pyav")
+
+
+def episode_actions(dataset, index: int) -> np.ndarray:
+    """Episode ``index``'s actions, in order, from the dataset's own table."""
+    table = dataset.hf_dataset.with_format("numpy")
+    rows = np.flatnonzero(np.asarray(table["episode_index"]) == index)
+    return np.stack([np.asarray(table[int(i)]["action"]) for i in rows])

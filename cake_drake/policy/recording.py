@@ -1,0 +1,261 @@
+"""Recording demonstrations, replaying them, evaluating policies: loops of episodes.
+
+``record``: episodes of a demonstrator policy (the classical cake as a policy by default)
+on seeded problems, each finished episode kept at once in ``OUT/episodes/`` (so an
+interrupted recording keeps what finished and ``resume`` runs only the rest); the
+successful ones then become one LeRobot dataset in ``OUT`` (``meta/``, ``data/``,
+``videos/``: :mod:`cake_drake.policy.dataset`), written in seed order whatever the
+workers, and ``OUT/report.json`` says what was recorded and why the others failed.
+
+``replay_check``: every episode's actions fed open loop through the same environment
+from the same seed; the fraction that builds the goal again.
+
+``evaluate``: a policy over seeded problems; success with a 95 % Wilson interval, per
+problem size, steps, time and the reasons episodes ended.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import os
+import shutil
+from collections import Counter
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from cake_drake.errors import InputError, OutputError
+from cake_drake.policy.rollout import EXPERT, Episode, EpisodeSpec, replay, rollout
+
+RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
+
+
+def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
+    """The episodes a scenario describes: its problem (``task.generate``: that many blocks,
+    one problem per seed; ``task.problem``: that one), its cameras (the default two when
+    it names none), and its ``!Policy`` (action space, rate, steps, the policy itself)."""
+    from cake_drake.scenario import Policy, resolve_path
+    from cake_drake.world.cameras import default_cameras
+
+    s = scenario
+    blocks, problem = (3, 8), None
+    if s.task.generate is not None:
+        blocks = s.task.generate.blocks
+    elif s.task.problem:
+        problem = str(resolve_path(s.task.problem))
+    ref = s.reference
+    spec = EpisodeSpec(
+        blocks=blocks, problem=problem, cameras=tuple(s.cameras or default_cameras())
+    )
+    if isinstance(ref, Policy):
+        spec = replace(
+            spec,
+            control_mode=ref.action_space,
+            rate_hz=ref.rate_hz,
+            max_steps=ref.max_steps,
+            policy=ref.factory or EXPERT,
+            options={k: v for k, v in (ref.options or {}).items()},
+        )
+    if policy:
+        spec = replace(spec, policy=policy, options={})
+    return spec
+
+
+def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The 95 % Wilson score interval of a success rate."""
+    if n == 0:
+        return 0.0, 1.0
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+# --- workers ------------------------------------------------------------------------------
+
+
+def _record_one(args) -> dict:
+    spec, seed, folder = args
+    ep = rollout(spec, seed, record=True)
+    row = {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
+    if ep.success and ep.actions is not None:
+        tmp = Path(folder) / f".ep_{seed}.npz"
+        with open(tmp, "wb") as f:
+            np.savez(f, states=ep.states, actions=ep.actions, task=ep.task,
+                     **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
+        os.replace(tmp, Path(folder) / f"ep_{seed}.npz")
+    Path(folder, f"ep_{seed}.json").write_text(json.dumps(row) + "\n")
+    return row
+
+
+def _evaluate_one(args) -> dict:
+    spec, seed = args
+    ep = rollout(spec, seed, record=False)
+    return {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
+
+
+def _map(fn, jobs, workers: int):
+    if workers <= 1 or len(jobs) <= 1:
+        return [fn(j) for j in jobs]
+    ctx = multiprocessing.get_context("spawn")
+    with ctx.Pool(min(workers, len(jobs))) as pool:
+        return pool.map(fn, jobs, chunksize=1)
+
+
+# --- record -------------------------------------------------------------------------------
+
+
+def record(spec: EpisodeSpec, out: Path, seeds: list[int], workers: int, resume: bool) -> dict:
+    """Record ``seeds``' episodes into the dataset at ``out`` (see the module)."""
+    from cake_drake.outputs.files import check_output_folder, claim_folder
+    from cake_drake.policy import dataset
+
+    dataset.require_lerobot()
+    dataset.features(spec.control_mode, spec.cameras)  # a mode that cannot be recorded
+    real = check_output_folder(out, "record", set(RECORD_OUTPUTS))
+    cache = real / "episodes"
+    if cache.is_dir() and any(cache.iterdir()) and not resume:
+        raise InputError(
+            f"{out}: holds a recording already; --resume continues it, or choose another --out"
+        )
+    claim_folder(out, "record", RECORD_OUTPUTS)
+    cache.mkdir(exist_ok=True)
+    done = {int(p.stem[3:]) for p in cache.glob("ep_*.json")} if resume else set()
+    todo = [s for s in seeds if s not in done]
+    _map(_record_one, [(spec, s, str(cache)) for s in todo], workers)
+    rows = [json.loads((cache / f"ep_{s}.json").read_text()) for s in seeds]
+    kept = [r for r in rows if r["success"] and (cache / f"ep_{r['seed']}.npz").is_file()]
+    staging = real / f".staging-{os.getpid()}"
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        frames = dataset.write(
+            staging / "dataset",
+            (_load(cache / f"ep_{r['seed']}.npz", r) for r in kept),
+            spec.rate_hz,
+            spec.control_mode,
+            spec.cameras,
+        )
+        report = {
+            "episodes": len(kept),
+            "frames": frames,
+            "fps": spec.rate_hz,
+            "control_mode": spec.control_mode,
+            "cameras": [c.name for c in spec.cameras],
+            "policy": spec.policy,
+            "seeds": [r["seed"] for r in kept],
+            "tried": len(rows),
+            "failed": [
+                {"seed": r["seed"], "reason": r["reason"], "steps": r["steps"]}
+                for r in rows
+                if not r["success"]
+            ],
+            "spec": _spec_json(spec),
+        }
+        (staging / "dataset" / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+        _install(real, staging / "dataset", ("meta", "data", "videos", "report.json"))
+    except OSError as e:
+        raise OutputError(f"{out}: cannot write the dataset ({e.strerror or e})") from None
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return report
+
+
+def _load(path: Path, row: dict) -> Episode:
+    with np.load(path) as z:
+        images = {k[6:]: z[k] for k in z.files if k.startswith("image_")}
+        return Episode(
+            row["seed"], True, row["reason"], row["steps"], row["wall_s"], str(z["task"]),
+            row["blocks"], z["states"], z["actions"], images,
+        )  # fmt: skip
+
+
+def _install(real: Path, new: Path, names) -> None:
+    """Put ``new``'s entries in place of ``real``'s, old ones moved aside first."""
+    aside = real / f".old-{os.getpid()}"
+    aside.mkdir(exist_ok=True)
+    try:
+        for name in names:
+            if (real / name).exists():
+                os.rename(real / name, aside / name)
+        for name in names:
+            if (new / name).exists():
+                os.rename(new / name, real / name)
+    finally:
+        shutil.rmtree(aside, ignore_errors=True)
+
+
+def _spec_json(spec: EpisodeSpec) -> dict:
+    d = asdict(spec)
+    d["cameras"] = [asdict(c) for c in spec.cameras]
+    d["blocks"] = list(spec.blocks) if isinstance(spec.blocks, tuple) else spec.blocks
+    return d
+
+
+def _spec_from_json(d: dict) -> EpisodeSpec:
+    blocks = tuple(d["blocks"]) if isinstance(d["blocks"], list) else d["blocks"]
+    return EpisodeSpec(
+        blocks=blocks,
+        problem=d["problem"],
+        control_mode=d["control_mode"],
+        rate_hz=d["rate_hz"],
+        max_steps=d["max_steps"],
+        cameras=(),  # the replay judges from poses: no images needed
+        policy=d["policy"],
+        options=d["options"],
+    )
+
+
+# --- replay -------------------------------------------------------------------------------
+
+
+def _replay_one(args) -> bool:
+    spec, seed, actions = args
+    return replay(spec, seed, actions)
+
+
+def replay_check(root: Path, workers: int) -> dict:
+    """Replay every episode of the dataset at ``root`` open loop (see the module)."""
+    from cake_drake.policy import dataset
+
+    report_path = root / "report.json"
+    if not report_path.is_file():
+        raise InputError(f"{root}: no report.json; not a dataset written by cake_drake.record")
+    report = json.loads(report_path.read_text())
+    data = dataset.read(root)
+    spec = _spec_from_json(report["spec"])
+    jobs = [
+        (spec, seed, dataset.episode_actions(data, k)) for k, seed in enumerate(report["seeds"])
+    ]
+    rebuilt = _map(_replay_one, jobs, workers)
+    return {"episodes": len(jobs), "rebuilt": sum(rebuilt), "per_episode": rebuilt}
+
+
+# --- evaluate -----------------------------------------------------------------------------
+
+
+def evaluate(spec: EpisodeSpec, seeds: list[int], workers: int) -> tuple[list[dict], dict]:
+    """Rows (one per episode) and the summary of ``spec.policy`` over ``seeds``."""
+    rows = _map(_evaluate_one, [(spec, s) for s in seeds], workers)
+    wins = sum(r["success"] for r in rows)
+    lo, hi = wilson(wins, len(rows))
+    sizes = {}
+    for n in sorted({r["blocks"] for r in rows}):
+        sub = [r for r in rows if r["blocks"] == n]
+        k = sum(r["success"] for r in sub)
+        sizes[str(n)] = {"episodes": len(sub), "success": k, "ci95": list(wilson(k, len(sub)))}
+    summary = {
+        "policy": spec.policy,
+        "control_mode": spec.control_mode,
+        "episodes": len(rows),
+        "success": wins,
+        "rate": wins / len(rows) if rows else 0.0,
+        "ci95": [lo, hi],
+        "per_size": sizes,
+        "mean_steps": float(np.mean([r["steps"] for r in rows])) if rows else 0.0,
+        "mean_wall_s": float(np.mean([r["wall_s"] for r in rows])) if rows else 0.0,
+        "reasons": dict(Counter(r["reason"] for r in rows)),
+    }
+    return rows, summary
