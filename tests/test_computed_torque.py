@@ -110,7 +110,42 @@ def test_gains_cli_writes_plot_and_table(position_run, tmp_path):
     assert [run["kd"] for run in data["runs"]] == [20.0, 5.0]
     assert len(data["runs"][0]["rms_tracking_error"]) == 7
     assert (tmp_path / "kd_comparison.png").stat().st_size > 10_000
-    assert "Kd" in r.stdout
+    assert (tmp_path / "step_response.png").stat().st_size > 10_000
+    assert "Kd" in r.stdout and "overshoot theory" in r.stdout and "with Ki 200" in r.stdout
+    steps = {s["kd"]: s for s in data["theory"]["step"]}
+    assert steps[5.0]["zeta"] == 0.25 and abs(steps[5.0]["overshoot_theory"] - 0.444) < 1e-3
+
+
+def test_theory_of_the_error_equation():
+    from cake_drake.gains.step import theory
+
+    assert theory(100, 20).zeta == 1.0 and theory(100, 20).overshoot == 0.0
+    assert abs(theory(100, 5).overshoot - 0.4443) < 1e-3  # exp(-zeta pi / sqrt(1 - zeta^2))
+    assert abs(theory(100, 5).settling_s - 1.41) < 0.01
+    assert abs(theory(100, 20).settling_s - 0.58) < 0.01
+    assert theory(100, 40).overshoot == 0.0 and theory(100, 40).settling_s > 0.58
+
+
+@pytest.mark.parametrize("kd", [20.0, 5.0])
+def test_every_joints_step_response_is_the_theorys_within_ten_percent(kd):
+    """With the control plant matching the arm, computed torque leaves each joint the
+    mass-spring-damper e'' + Kd e' + Kp e = 0 (the exercise's Kd lesson)."""
+    from cake_drake.gains.step import step_response, theory
+
+    r, th = step_response(100.0, kd), theory(100.0, kd)
+    assert np.all(np.abs(r.overshoot - th.overshoot) <= 0.1 * max(th.overshoot, 0.05))
+    assert np.all(np.abs(r.settling_s - th.settling_s) <= 0.1 * th.settling_s)
+    assert np.all(np.abs(r.steady) < 1e-4)
+
+
+def test_an_unmodelled_payload_leaves_a_steady_error_integral_action_removes():
+    from cake_drake.gains.step import payload_response
+
+    sag = payload_response(0.5, 100.0, 20.0, ki=0.0).steady
+    assert np.max(np.abs(sag)) > 0.01  # > 10 mrad, however long it waits
+    stiffer = payload_response(0.5, 400.0, 40.0, ki=0.0).steady
+    assert 0 < np.max(np.abs(stiffer)) < np.max(np.abs(sag))  # Kp shrinks it, never removes it
+    assert np.max(np.abs(payload_response(0.5, 100.0, 20.0, ki=200.0).steady)) < 5e-4
 
 
 def test_gains_cli_bad_reference_is_one_line(tmp_path):

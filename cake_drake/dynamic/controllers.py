@@ -85,14 +85,18 @@ def _check_gains(kp: Sequence[float], kd: Sequence[float], where: str) -> None:
 
 @dataclass
 class ComputedTorque:
-    """Drake's ``InverseDynamicsController``; ``kp`` (1/s^2), ``kd`` (1/s): one or seven."""
+    """Drake's ``InverseDynamicsController``; ``kp`` (1/s^2), ``kd`` (1/s), ``ki`` (1/s^3,
+    integral action on the joint error; 0 by default): one value or seven each."""
 
     kp: list[float] = field(default_factory=lambda: [100.0])
     kd: list[float] = field(default_factory=lambda: [20.0])
+    ki: list[float] = field(default_factory=lambda: [0.0])
     name: ClassVar[str] = "torque"
 
     def check(self) -> None:
         _check_gains(self.kp, self.kd, "controller (ComputedTorque)")
+        if np.any(per_joint(self.ki, "controller (ComputedTorque).ki") < 0):
+            raise InputError(f"controller (ComputedTorque): ki must be >= 0 (got {self.ki})")
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
@@ -102,9 +106,10 @@ class ComputedTorque:
 
     def add_to(self, builder, scene, desired_state, desired_acceleration) -> OutputPort:
         kp, kd = self.gains()
+        ki = per_joint(self.ki, "ki")
         controller = builder.AddNamedSystem(
             "inverse_dynamics_controller",
-            InverseDynamicsController(scene.control_plant, kp, np.zeros(7), kd, True),
+            InverseDynamicsController(scene.control_plant, kp, ki, kd, True),
         )
         builder.Connect(
             scene.plant.get_state_output_port(scene.arm),

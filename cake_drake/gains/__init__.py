@@ -146,7 +146,7 @@ def _replay(out: Path, row: dict, kp: list[float]) -> Replay:
 
 
 #: The files a gains study writes.
-GAINS_OUTPUTS = ("kd_comparison.png", "gains.json", "reference.npz")
+GAINS_OUTPUTS = ("kd_comparison.png", "step_response.png", "gains.json", "reference.npz")
 
 
 def gains_inputs(base: Scenario) -> list[Path]:
@@ -160,14 +160,19 @@ def write_study(base: Scenario, kds: Sequence[float], out: Path) -> dict:
 
     The study works in a temporary folder; ``out`` is replaced whole at the end.
     """
+    from cake_drake.gains import step
+
     with tempfile.TemporaryDirectory(prefix="cake-drake-gains-") as tmp:
         table, results = study(base, kds, Path(tmp))
+        kp = float(table["kp"] if np.ndim(table["kp"]) == 0 else table["kp"][0])
+        table["theory"], responses = step.study(kp, list(kds))
         with OutputDir(out, "gains", GAINS_OUTPUTS, gains_inputs(base)) as staged:
             recorded = Path(tmp) / "reference" / "trajectory.npz"
             if recorded.exists():
                 shutil.copyfile(recorded, staged.path("reference.npz"))
                 table["reference"] = "reference.npz"
             comparison_plot(results, staged.path("kd_comparison.png"))
+            step.plot(responses, kp, staged.path("step_response.png"))
             staged.write_json("gains.json", table)
             staged.commit()
     return table
@@ -205,17 +210,21 @@ def comparison_plot(
 
 
 def format_table(table: dict) -> str:
+    from cake_drake.gains.step import format_study
+
     lines = [
-        f"Kp = {table['kp']:g}; reference {table['reference']}",
+        f"the run replayed, Kp = {table['kp']:g}; reference {table['reference']}",
         f"{'Kd':>6} {'RMS err j4 [mrad]':>18} {'max err j4 [mrad]':>18} "
-        f"{'max err all [mrad]':>19} {'settle median/max [s]':>22} {'tower':>6}",
+        f"{'max err j5-7 [mrad]':>20} {'max err all [mrad]':>19} {'tower':>6}",
     ]
     for r in table["runs"]:
-        st = r["settling_time_s"]
+        m = r["max_tracking_error"]
         lines.append(
             f"{r['kd']:>6g} {r['rms_tracking_error'][3] * 1000:>18.3f} "
-            f"{r['max_tracking_error'][3] * 1000:>18.3f} "
-            f"{max(r['max_tracking_error']) * 1000:>19.3f} "
-            f"{st['median']:>10.3f} / {st['max']:<9.3f} {'yes' if r['tower_built'] else 'no':>6}"
+            f"{m[3] * 1000:>18.3f} {max(m[4:]) * 1000:>20.3f} {max(m) * 1000:>19.3f} "
+            f"{'yes' if r['tower_built'] else 'no':>6}"
         )
+    if "theory" in table:
+        kp = table["kp"] if np.ndim(table["kp"]) == 0 else table["kp"][0]
+        lines += format_study(table["theory"], kp)
     return "\n".join(lines)
