@@ -133,11 +133,16 @@ class ProgressBar:
     def update(self, sim_t: float, wall: float, done: int, final: bool = False) -> None:
         if not self.enabled:
             return
-        frac = done / self.n if self.n else 1.0
+        # A run that recovers executes more actions than its plan had: the bar is full
+        # and the count goes on ("action 12 of 10+").
+        frac = min(1.0, done / self.n) if self.n else 1.0
         bar = "#" * int(20 * frac) + "." * (20 - int(20 * frac))
         rtf = sim_t / wall if wall > 0 else 0.0
         what = self.describe(done) if done < self.n else "done"
-        step = f"action {min(done + 1, self.n)}/{self.n} {what}"
+        if final or done < self.n:
+            step = f"action {min(done + 1, self.n)}/{self.n} {what}"
+        else:
+            step = f"action {done + 1} of {self.n}+ (recovering)"
         line = f"simulating [{bar}] {sim_t:5.1f} s sim  RTF {rtf:5.1f}  {step}"
         if self.tty:
             print("\r" + line.ljust(100), end="\n" if final else "", file=sys.stderr, flush=True)

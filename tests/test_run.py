@@ -234,3 +234,25 @@ def test_what_the_world_cannot_run_is_refused_before_simulating(
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
     assert "simulat" not in r.stderr and not (tmp_path / "o").exists()
+
+
+def test_the_progress_bar_keeps_its_width_when_a_recovery_runs_past_the_plan(capsys):
+    from cake_drake.execution import ProgressBar
+
+    bar = ProgressBar(10, lambda k: f"(step {k})")
+    bar.update(5.0, 1.0, 13)
+    bar.update(9.0, 2.0, 14, final=True)
+    lines = capsys.readouterr().err.splitlines()
+    assert [ln[ln.index("[") : ln.index("]") + 1] for ln in lines] == ["[" + "#" * 20 + "]"] * 2
+    assert "action 14 of 10+ (recovering)" in lines[0] and "action 10/10 done" in lines[1]
+
+
+def test_the_joint_plot_marks_each_fault_when_it_struck():
+    from types import SimpleNamespace
+
+    from cake_drake.outputs.report import fault_marks
+    from cake_drake.world.faults import Knock, Move, Slip
+
+    logs = SimpleNamespace(t=np.arange(0, 5, 0.5), action=np.array([-1, 0, 0, 1, 1, 2, 2, 2, 3, 3]))
+    marks = fault_marks([Knock(cube="c", time=1.2), Move(cube="a", time=3.0), Slip(action=3)], logs)
+    assert marks == [(1.2, "knock c"), (3.0, "move a"), (2.5, "slip (action 3)")]

@@ -195,6 +195,7 @@ def test_smoke_on_the_pool_writes_table_plots_and_runs(smoke_pool):
     assert all(r["success"] for r in rows), [r["message"] for r in rows]
     assert {r["controller.kd"] for r in rows} == {20.0, 5.0}
     assert all(r["n_blocks"] == 3 and r["plan_length"] > 0 for r in rows)
+    assert all(0 < r["ik_s"] < r["simulation_wall_s"] and r["ik_solves"] > 0 for r in rows)
     # A lower Kd tracks worse, on each problem.
     for seed in (1, 2):
         by_kd = {r["controller.kd"]: r for r in rows if r["task.generate.seed"] == seed}
@@ -337,3 +338,18 @@ def test_input_error_for_a_sweep_of_nothing_to_vary_is_not_raised():
     assert len(parse_sweep("description: one run\n").runs()) == 1
     with pytest.raises(InputError, match="a sweep file is a mapping"):
         parse_sweep("- 1\n")
+
+
+def test_a_categorical_axis_is_drawn_as_categories_in_file_order():
+    from cake_drake.sweeps.table import axis_figure
+
+    rows = [
+        {"task.planner": p, "status": "done", "success": True, "tracking_rms_mrad": 1.0,
+         "plan_length": n, "wall_s": 1.0}
+        for p, n in [("gbfs-ff", 14), ("astar-lmcut", 10), ("wastar-ff", 12)]
+    ]  # fmt: skip
+    fig = axis_figure(rows, "task.planner")
+    ax = fig.axes[2]  # plan length
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["gbfs-ff", "astar-lmcut", "wastar-ff"]
+    (line,) = ax.get_lines()
+    assert line.get_linewidth() == 0 and list(line.get_ydata()) == [14, 10, 12]

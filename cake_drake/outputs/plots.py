@@ -80,12 +80,14 @@ def joint_plot(
     tau_label: str = "τ commanded",
     extra_tau: Sequence[tuple[np.ndarray, str]] = (),
     marks: Sequence[tuple[float, str]] = (),
+    faults: Sequence[tuple[float, str]] = (),
 ) -> Figure:
     """Three panels for one joint (1-based): q and q_d, tracking error, torque.
 
-    ``marks`` are (time, label) of the monitor's events (replans, repeats, skips): a
-    vertical line through every panel, labelled on the top one. Saved to ``path`` when
-    given; the figure is returned either way.
+    ``marks`` are (time, label) of the monitor's events (replans, repeats, skips), and
+    ``faults`` of the faults that struck (a knock, a move, a slip): a vertical line
+    through every panel (purple dotted and red dash-dot), labelled on the top one. Saved
+    to ``path`` when given; the figure is returned either way.
     """
     j = joint - 1
     spans = phase_spans(t, phase)
@@ -110,12 +112,14 @@ def joint_plot(
     ax.set_ylabel(f"joint {joint} torque [N·m]")
     ax.set_xlabel("time [s]")
     ax.legend(loc="lower right", fontsize=8)
-    for when, label in marks:
+    lines = [(w, lb, "tab:purple", ":", -10) for w, lb in marks]
+    lines += [(w, lb, "tab:red", "-.", -22) for w, lb in faults]
+    for when, label, colour, style, dy in lines:
         for a in axes:
-            a.axvline(when, color="tab:purple", lw=1.2, ls=":")
+            a.axvline(when, color=colour, lw=1.2, ls=style)
         axes[0].annotate(
-            label, (when, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -10),
-            textcoords="offset points", fontsize=8, color="tab:purple",
+            label, (when, 1.0), xycoords=("data", "axes fraction"), xytext=(2, dy),
+            textcoords="offset points", fontsize=8, color=colour,
         )  # fmt: skip
     if title:
         fig.suptitle(title, y=0.99, fontsize=11)

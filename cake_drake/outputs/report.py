@@ -138,6 +138,21 @@ def _policy(source) -> dict | None:
     }
 
 
+def fault_marks(faults, logs) -> list[tuple[float, str]]:
+    """(time, label) of each fault that struck: a knock's or a move's time, and for a
+    slip the start of the action it struck (when that action ran)."""
+    marks = []
+    for f in faults:
+        kind = type(f).__name__.lower()
+        if hasattr(f, "time"):
+            marks.append((float(f.time), f"{kind} {f.cube}"))
+        elif hasattr(f, "action"):
+            rows = np.flatnonzero(np.asarray(logs.action) == f.action - 1)
+            if len(rows):
+                marks.append((float(logs.t[rows[0]]), f"{kind} (action {f.action})"))
+    return marks
+
+
 def _gains(controller) -> dict | None:
     """Per-joint gains of a controller that has them (the shipped ones do)."""
     gains = getattr(controller, "gains", None)
@@ -186,6 +201,7 @@ def write_outputs(
             (gravity_torques(cake.scene.control_plant, logs.q), "g(q): static gravity term")
         ],
         marks=[(e["time_s"], e["kind"]) for e in execution.monitoring.get("events", [])],
+        faults=fault_marks(result.faults, logs),
     )
     try:
         write_plan(plan, out.path("plan.txt"))

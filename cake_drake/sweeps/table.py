@@ -116,9 +116,13 @@ def _distinct(rows: list[dict], axis: str) -> int:
 
 
 def axis_figure(rows: list[dict], axis: str, series: str | None = None) -> Figure:
-    """Success rate, tracking error, plan length and run time against ``axis``."""
-    xs = sorted({_key(r.get(axis)): r.get(axis) for r in rows}.values(), key=_sort_key)
+    """Success rate, tracking error, plan length and run time against ``axis``: a numeric
+    axis as a line over its values; a categorical one (a planner, a controller) as one
+    marker per category, in the order the sweep file lists them, unconnected."""
+    xs = list({_key(r.get(axis)): r.get(axis) for r in rows}.values())  # file order
     numeric = _numeric(xs)
+    if numeric:
+        xs.sort(key=_sort_key)
     groups: dict[str, list[dict]] = defaultdict(list)
     for r in rows:
         groups[_key(r.get(series)) if series else ""].append(r)
@@ -132,9 +136,10 @@ def axis_figure(rows: list[dict], axis: str, series: str | None = None) -> Figur
             ]
             pos = xs if numeric else list(range(len(xs)))
             legend = f"{series} = {members[0].get(series)}" if series else None
-            ax.plot(pos, ys, marker="o", lw=1.2, label=legend)
+            ax.plot(pos, ys, marker="o", lw=1.2 if numeric else 0, label=legend)
         if not numeric:
             ax.set_xticks(range(len(xs)), [str(x) for x in xs], rotation=20, fontsize=8)
+            ax.set_xlim(-0.5, len(xs) - 0.5)
         ax.set_xlabel(axis)
         ax.set_ylabel(label)
         if how == "rate":

@@ -33,6 +33,8 @@ METRICS = (
     "wall_s",
     "planning_s",
     "simulation_wall_s",
+    "ik_s",
+    "ik_solves",
     "rtf",
     "tracking_rms_mrad",
     "tracking_max_mrad",
@@ -121,6 +123,9 @@ def _run(scenario, collect: list[str], folder: Path) -> dict:
         "sim_s": round(float(e.sim_s), 4),
         "planning_s": round(result.stages.get("planning", math.nan), 4),
         "simulation_wall_s": round(float(e.wall_s), 4),
+        # IK runs inside the simulation: its share of simulation_wall_s.
+        "ik_s": round(sum(result.cake.ik.times_ms) / 1000, 4) if result.cake.ik else None,
+        "ik_solves": len(result.cake.ik.times_ms) if result.cake.ik else 0,
         "rtf": round(float(e.rtf), 3),
         "tracking_rms_mrad": round(float(np.sqrt(np.mean(err**2))) * 1000, 4) if err.size else None,
         "tracking_max_mrad": round(float(np.max(np.abs(err))) * 1000, 4) if err.size else None,
