@@ -255,6 +255,8 @@ def scenario_from_args(args: argparse.Namespace):
         s.seed = args.seed
     if args.meshcat:
         s.visualization.meshcat = True
+        if sys.stdin.isatty():  # someone is watching: real time, and the viewer stays
+            s.visualization.realtime_rate = 1.0
     if args.cameras and not s.cameras:
         from cake_drake.world.cameras import default_cameras
 
@@ -281,9 +283,24 @@ def main_run(argv: list[str] | None = None) -> int:
     where = f"outputs in {scenario.outputs.folder}/"
     if result.success:
         print(f"goal reached: {tower_text(e)} — {rate}; {where}")
-        return EXIT_OK
-    print(f"error: plan not executed: {result.message} — {rate}; {where}", file=sys.stderr)
-    return EXIT_EXECUTION_FAILED
+    else:
+        print(f"error: plan not executed: {result.message} — {rate}; {where}", file=sys.stderr)
+    if scenario.visualization.meshcat and sys.stdin.isatty():
+        _keep_viewer_open()
+    return EXIT_OK if result.success else EXIT_EXECUTION_FAILED
+
+
+def _keep_viewer_open() -> None:
+    """Meshcat's server lives as long as this process: wait until the user is done."""
+    print(
+        "Meshcat keeps the run (Animations: play it again); press Enter or Ctrl-C to close",
+        file=sys.stderr,
+        flush=True,
+    )
+    try:
+        sys.stdin.readline()
+    except KeyboardInterrupt:
+        pass
 
 
 GAINS_DOC = """Gains study: replay one recorded trajectory through InverseDynamicsController per Kd.

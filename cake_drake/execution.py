@@ -182,6 +182,7 @@ def execute(
     cube is set down elsewhere on the table.
     """
     simulator = Simulator(cake.diagram)
+    simulator.set_target_realtime_rate(cake.scenario.visualization.realtime_rate)
     context = simulator.get_mutable_context()
     specs = plugin_specs(cake.scenario)
     step_budget = cake.scenario.simulation.step_budget_s

@@ -137,6 +137,7 @@ def _check_numbers(s: Scenario) -> None:
             "motion.avoid_collisions needs motion.collision_check (--avoid-collisions "
             "cannot go with --no-collision-check)"
         )
+    _range(s.visualization.realtime_rate, 0.0, 100.0, "visualization.realtime_rate")
     _range(sim.settle_s, 0.0, 60.0, "simulation.settle_s", " s")
     _range(sim.max_sim_s, 1.0, 3600.0, "simulation.max_sim_s", " s")
     _range(sim.step_budget_s, 0.1, 3600.0, "simulation.step_budget_s", " s")

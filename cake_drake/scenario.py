@@ -159,6 +159,9 @@ class Outputs:
 @dataclass
 class Visualization:
     meshcat: bool = False  # show the run live in Meshcat and write replay.html
+    #: Simulated seconds per wall second to hold the simulation to (0: as fast as it goes;
+    #: ``--meshcat`` from a terminal sets 1, real time, to watch).
+    realtime_rate: float = 0.0
 
 
 @dataclass

@@ -245,3 +245,33 @@ def test_replay_shows_whole_robot_in_a_browser(two_cube_run, tmp_path):
         f"the robot's silhouette from its base stops {gap:.0f} px short of its hand: "
         "the arm is drawn apart from its hand"
     )
+
+
+@pytest.mark.slow
+def test_meshcat_from_a_terminal_runs_in_real_time_and_waits_for_enter(tmp_path):
+    """From a terminal, --meshcat holds the simulation to real time and keeps the viewer
+    (its server is this process) until Enter; with stdin not a terminal (CI) it does not."""
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    master, slave = pty.openpty()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.run", "--meshcat", "--no-render", "--quiet",
+         "--out", "o"],
+        cwd=tmp_path, stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)},
+    )  # fmt: skip
+    os.close(slave)
+    seen = ""
+    while "press Enter" not in seen:
+        line = proc.stderr.readline()
+        assert line, f"ended without the prompt: {seen}"
+        seen += line
+    assert proc.poll() is None  # waiting for the user
+    os.write(master, b"\n")
+    out, _ = proc.communicate(timeout=60)
+    os.close(master)
+    assert proc.returncode == 0 and "goal reached" in out
+    assert "realtime_rate: 1.0" in (tmp_path / "o" / "scenario.yaml").read_text()
