@@ -749,6 +749,12 @@ def saycan_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--time-limit", type=float, default=30.0, metavar="S", help="planner time limit (30 s)"
     )
+    parser.add_argument(
+        "--add-objects",
+        action="store_true",
+        help="declare the objects the transcript names that the problem lacks (typed from "
+        "the skill that names them; where they are stays unknown) and say which",
+    )
     return parser
 
 
@@ -757,7 +763,9 @@ def main_saycan(argv: list[str] | None = None) -> int:
         SAYCAN_OUTPUTS,
         analyse,
         load_transcript,
+        missing_objects,
         render_text,
+        with_objects,
         write_outputs,
     )
     from cake_drake.outputs.files import check_output_folder
@@ -770,6 +778,11 @@ def main_saycan(argv: list[str] | None = None) -> int:
     check_output_folder(out, "saycan", SAYCAN_OUTPUTS, inputs)
     transcript = load_transcript(args.transcript)
     problem = load_problem(args.domain, args.problem, require_goal=False)
+    if args.add_objects:
+        added = missing_objects(transcript, problem)
+        problem = with_objects(problem, added)
+        listed = ", ".join(f"{name} ({kind})" for name, kind in added) or "none"
+        print(f"added objects: {listed}", file=sys.stderr)
     analysis = analyse(transcript, problem, args.planner, time_limit)
     print(render_text(analysis), end="")
     write_outputs(analysis, out, inputs)
@@ -785,6 +798,8 @@ COMMANDS: dict[str, tuple[Callable[[list[str] | None], int], str]] = {
     "plan": (main_plan, "plan only"),
     "validate": (main_validate, "check a plan against a problem, VAL-style"),
     "saycan": (main_saycan, "map a SayCan-style transcript onto the kitchen domain"),
+    "record": (main_record, "demonstrations as a LeRobot dataset; replay one"),
+    "evaluate": (main_evaluate, "a policy's success rate on seeded problems"),
 }
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import random
+import re
 import subprocess
 import sys
 
@@ -695,3 +696,22 @@ def test_cli_bad_inputs_exit_2(args, expected):
     r = saycan(*args)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert r.stderr.count("\n") == 1 and expected in r.stderr
+
+
+def test_add_objects_declares_what_the_transcript_names_and_the_kitchen_lacks(tmp_path):
+    """SayCan's own kitchen has no banana: without --add-objects its steps have no schema;
+    with it the banana is declared (an item: the skill 'find' takes one) and the first
+    step fails on what nobody said, where the banana is."""
+    t = tmp_path / "banana.txt"
+    t.write_text(
+        "Human: Bring me a banana\nRobot: 1. find a banana, 2. pick up the banana, "
+        "3. bring it to you, 4. done.\n"
+    )
+    plain = saycan(str(t), "--out", str(tmp_path / "plain"))
+    assert plain.returncode == 1 and "added objects" not in plain.stderr
+    assert re.search(r"1\s+find a banana\s+no schema", plain.stdout), plain.stdout
+    added = saycan(str(t), "--out", str(tmp_path / "added"), "--add-objects")
+    assert added.returncode == 1, added.stderr
+    assert "added objects: banana (item)" in added.stderr
+    assert re.search(r"1\s+find a banana\s+precondition fails", added.stdout), added.stdout
+    assert "banana - item" in (tmp_path / "added" / "problem.pddl").read_text()

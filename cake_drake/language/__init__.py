@@ -24,8 +24,10 @@ from cake_drake.language.mapping import (
     Analysis,
     StepResult,
     analyse,
+    missing_objects,
     problem_with_goal,
     side_by_side,
+    with_objects,
 )
 from cake_drake.language.methods import Method, MethodStep, method_bindings
 from cake_drake.language.report import (
@@ -45,6 +47,8 @@ KITCHEN_PROMPT = MODELS_DIR / "pddl" / "kitchen_prompt.pddl"
 TRANSCRIPTS_DIR = MODELS_DIR / "transcripts"
 
 __all__ = [
+    "missing_objects",
+    "with_objects",
     "AFTER_DONE",
     "AMBIGUOUS",
     "DONE",

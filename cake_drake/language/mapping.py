@@ -746,3 +746,64 @@ def side_by_side(
         last_left = max((i for i, (_, la, _) in enumerate(rows) if la), default=-1)
         rows.insert(last_left + 1, ("x", str(failed), ""))
     return rows
+
+
+# ----------------------------------------------------------------------- --add-objects
+
+
+def _slot_type(verb: Verb, slot: str, problem: Problem) -> str | None:
+    """The type the domain gives the schema parameter a verb's ``{slot}`` fills."""
+    for method in verb.methods:
+        for step in method.steps:
+            schema = problem.domain.actions.get(step.schema)
+            if schema is None:
+                continue
+            for param, value in step.args:
+                if value == slot:
+                    for var, kind in schema.params:
+                        if var == param:
+                            return kind
+    return None
+
+
+def missing_objects(transcript: Transcript, problem: Problem) -> list[tuple[str, str]]:
+    """(name, type) of every object the transcript's steps name that the problem lacks,
+    typed by the schema parameter its noun fills (an item, a location, a container), in
+    the order the steps name them."""
+    found: dict[str, str] = {}
+    for step in transcript.steps:
+        matched = match_verb(step.text) if step.text else None
+        if matched is None:
+            continue
+        verb, phrases = matched
+        for slot, phrase in sorted(phrases.items()):
+            p = _strip_articles(phrase)
+            if not p or p in PRONOUNS or noun_candidates(p, problem):
+                continue
+            kind = _slot_type(verb, slot, problem)
+            name = re.sub(r"[^a-z0-9]+", "-", _singulars(p)[-1]).strip("-")
+            if kind and name and name not in found and name not in problem.object_types:
+                found[name] = kind
+    return list(found.items())
+
+
+def with_objects(problem: Problem, objects: list[tuple[str, str]]) -> Problem:
+    """``problem`` with ``objects`` declared (no facts about them: where they are is not
+    known, and a step that needs it says so)."""
+    if not objects:
+        return problem
+    text = problem.text
+    m = re.search(r"\(:objects\b", text, re.IGNORECASE)
+    if m is None:
+        raise InputError(f"{problem.problem_path}: no (:objects ...) to add objects to")
+    depth, i = 0, m.start()
+    while i < len(text):
+        depth += {"(": 1, ")": -1}.get(text[i], 0)
+        if depth == 0:
+            break
+        i += 1
+    added = "".join(f"\n    {name} - {kind}" for name, kind in objects)
+    composed = text[:i] + added + "  ; added by --add-objects\n  " + text[i:]
+    return parse_problem(
+        problem.domain, composed, problem.problem_path, require_goal=problem.has_goal
+    )
