@@ -790,46 +790,6 @@ def main_saycan(argv: list[str] | None = None) -> int:
     return EXIT_OK if analysis.ok else EXIT_NO_PLAN
 
 
-COMMANDS: dict[str, tuple[Callable[[list[str] | None], int], str]] = {
-    "run": (main_run, "plan and execute a problem on the simulated Panda (a scenario)"),
-    "gains": (main_gains, "the Kd study: replay one reference per Kd"),
-    "sweep": (main_sweep, "many runs in parallel (local pool or Ray): a table and plots"),
-    "world": (main_world, "lay out a problem's initial state and render it"),
-    "plan": (main_plan, "plan only"),
-    "validate": (main_validate, "check a plan against a problem, VAL-style"),
-    "saycan": (main_saycan, "map a SayCan-style transcript onto the kitchen domain"),
-    "record": (main_record, "demonstrations as a LeRobot dataset; replay one"),
-    "evaluate": (main_evaluate, "a policy's success rate on seeded problems"),
-}
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``cake-drake COMMAND [ARGS]``: the console script."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if not argv or argv[0] in ("-h", "--help"):
-        print("usage: cake-drake COMMAND [ARGS ...]\n\ncommands:")
-        for name, (_, summary) in COMMANDS.items():
-            print(f"  {name:<9} {summary}")
-        print("\n`cake-drake COMMAND --help` describes one.")
-        return EXIT_OK if argv else 2
-    name, rest = argv[0], argv[1:]
-    if name not in COMMANDS:
-        print(
-            f"error: cake-drake: unknown command {name!r}; choose one of: " + ", ".join(COMMANDS),
-            file=sys.stderr,
-        )
-        return 2
-    return run_cli(COMMANDS[name][0], rest)
-
-
-def console() -> None:
-    sys.exit(main())
-
-
-if __name__ == "__main__":
-    console()
-
-
 RECORD_DOC = """Record demonstrations as a LeRobot dataset (v3.0), or check one by replaying it.
 
 SPEC is a scenario: its problem (task.generate: that many blocks, a new problem per
@@ -1001,3 +961,43 @@ def _success_plot(summary: dict, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
+
+
+COMMANDS: dict[str, tuple[Callable[[list[str] | None], int], str]] = {
+    "run": (main_run, "plan and execute a problem on the simulated Panda (a scenario)"),
+    "gains": (main_gains, "the Kd study: replay one reference per Kd"),
+    "sweep": (main_sweep, "many runs in parallel (local pool or Ray): a table and plots"),
+    "world": (main_world, "lay out a problem's initial state and render it"),
+    "plan": (main_plan, "plan only"),
+    "validate": (main_validate, "check a plan against a problem, VAL-style"),
+    "saycan": (main_saycan, "map a SayCan-style transcript onto the kitchen domain"),
+    "record": (main_record, "demonstrations as a LeRobot dataset; replay one"),
+    "evaluate": (main_evaluate, "a policy's success rate on seeded problems"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``cake-drake COMMAND [ARGS]``: the console script."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print("usage: cake-drake COMMAND [ARGS ...]\n\ncommands:")
+        for name, (_, summary) in COMMANDS.items():
+            print(f"  {name:<9} {summary}")
+        print("\n`cake-drake COMMAND --help` describes one.")
+        return EXIT_OK if argv else 2
+    name, rest = argv[0], argv[1:]
+    if name not in COMMANDS:
+        print(
+            f"error: cake-drake: unknown command {name!r}; choose one of: " + ", ".join(COMMANDS),
+            file=sys.stderr,
+        )
+        return 2
+    return run_cli(COMMANDS[name][0], rest)
+
+
+def console() -> None:
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    console()
