@@ -47,7 +47,7 @@ METRICS = (
     "worker",
 )
 #: Columns that measure the machine rather than the run (they differ between engines).
-TIMINGS = ("wall_s", "planning_s", "simulation_wall_s", "rtf", "worker")
+TIMINGS = ("wall_s", "planning_s", "simulation_wall_s", "ik_s", "rtf", "worker")
 
 
 def empty_row(job: dict) -> dict:
