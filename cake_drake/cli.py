@@ -800,8 +800,9 @@ demonstrator is the classical cake as a policy (examples.expert_policy:make) unl
 
 Each successful episode becomes one episode of the dataset in --out (meta/, data/,
 videos/, lerobot's own writer); report.json lists what was recorded and why the other
-episodes failed. Finished episodes are kept in --out/episodes/ at once: an interrupted
-recording keeps them, and --resume records only the rest.
+episodes failed. Episodes run on a local pool (--workers N) or on Ray (--ray: a local
+instance; --ray ADDRESS: a cluster); this process keeps each as it finishes, in
+--out/episodes/: an interrupted recording keeps them, and --resume records only the rest.
 
 --replay DATASET feeds every episode's actions, open loop, through the same environment
 from the same seed and reports how many build the goal again.
@@ -825,9 +826,29 @@ def record_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=10, help="episodes to try (default 10)")
     p.add_argument("--policy", help="the demonstrator: module:attribute of a policy factory")
     p.add_argument("--workers", type=int, help="worker processes (default: cores)")
+    _ray_flag(p)
     p.add_argument("--resume", action="store_true", help="continue an interrupted recording")
     p.add_argument("--replay", type=Path, metavar="DATASET", help="replay a dataset's actions")
     return p
+
+
+def _ray_flag(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--ray",
+        nargs="?",
+        const="",
+        metavar="ADDRESS",
+        help="episodes on Ray: a local instance, or the cluster at ADDRESS (auto | HOST:PORT)",
+    )
+
+
+def _ray(address: str | None, workers: int):
+    """The Ray engine ``--ray`` asks for (None without it): checked before any work."""
+    if address is None:
+        return None
+    from cake_drake.sweeps import RayCluster
+
+    return RayCluster(address or None, None if address else workers)
 
 
 def _workers(n: int | None) -> int:
@@ -858,7 +879,7 @@ def main_record(argv: list[str] | None = None) -> int:
     scenario = load_scenario(args.spec, args.name)
     spec = spec_from_scenario(scenario, args.policy)
     seeds = [scenario.seed + k for k in range(args.episodes)]
-    report = record(spec, args.out, seeds, workers, args.resume)
+    report = record(spec, args.out, seeds, workers, args.resume, _ray(args.ray, workers))
     print(
         f"{args.out}: {report['episodes']}/{report['tried']} episodes recorded "
         f"({report['frames']} frames at {report['fps']:g} Hz, {spec.control_mode}, cameras "
@@ -893,6 +914,7 @@ def evaluate_parser() -> argparse.ArgumentParser:
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--blocks", type=int, nargs=2, metavar=("LO", "HI"), help="problem sizes")
     p.add_argument("--workers", type=int, help="worker processes (default: cores)")
+    _ray_flag(p)
     p.add_argument("--out", type=Path, default=Path("outputs") / "evaluate")
     return p
 
@@ -921,7 +943,7 @@ def main_evaluate(argv: list[str] | None = None) -> int:
 
         resolve(args.policy, {}, "policy")  # refused before any episode
         seeds = [scenario.seed + k for k in range(args.episodes)]
-        rows, summary = evaluate(spec, seeds, workers)
+        rows, summary = evaluate(spec, seeds, workers, _ray(args.ray, workers))
         from cake_drake.sweeps.table import write_table
 
         keys = ["seed", "blocks", "success", "steps", "wall_s", "reason", "task"]

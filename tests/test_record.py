@@ -144,6 +144,20 @@ def test_the_same_seeds_give_the_same_parquet_bytes_on_one_worker_and_two(record
 
 @needs_lerobot
 @pytest.mark.slow
+def test_on_local_ray_the_same_seeds_give_the_same_parquet_bytes(recorded):
+    pytest.importorskip("ray")
+    folder, _ = recorded
+    r = cake("record", "suite.yaml", "--name", "small", "--out", "dsray", "--episodes", "2",
+             "--ray", "--workers", "2", cwd=folder)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    one = sorted((folder / "ds1" / "data").rglob("*.parquet"))
+    ray = sorted((folder / "dsray" / "data").rglob("*.parquet"))
+    assert len(one) == len(ray) > 0
+    assert all(a.read_bytes() == b.read_bytes() for a, b in zip(one, ray, strict=True))
+
+
+@needs_lerobot
+@pytest.mark.slow
 def test_replaying_the_actions_open_loop_rebuilds_every_goal(recorded):
     folder, _ = recorded
     r = cake("record", "--replay", "ds1", "--workers", "2", cwd=folder)

@@ -77,39 +77,61 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
 # --- workers ------------------------------------------------------------------------------
 
 
-def _record_one(args) -> dict:
-    spec, seed, folder = args
-    ep = rollout(spec, seed, record=True)
+def _record_one(args) -> Episode:
+    """One episode, frames and all (run in a worker: a local process or a Ray node)."""
+    spec, seed = args
+    return rollout(spec, seed, record=True)
+
+
+def _keep(ep: Episode, folder: Path) -> dict:
+    """Write a finished episode into the recording's ``episodes/`` (its frames when it
+    succeeded, whole by rename; its verdict always, last); its row."""
     row = {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
     if ep.success and ep.actions is not None:
-        tmp = Path(folder) / f".ep_{seed}.npz"
+        tmp = folder / f".ep_{ep.seed}.npz"
         with open(tmp, "wb") as f:
             np.savez(f, states=ep.states, actions=ep.actions, task=ep.task,
                      **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
-        os.replace(tmp, Path(folder) / f"ep_{seed}.npz")
-    Path(folder, f"ep_{seed}.json").write_text(json.dumps(row) + "\n")
+        os.replace(tmp, folder / f"ep_{ep.seed}.npz")
+    (folder / f"ep_{ep.seed}.json").write_text(json.dumps(row) + "\n")
     return row
 
 
 def _evaluate_one(args) -> dict:
+    """One episode's row, no frames (run in a worker)."""
     spec, seed = args
     ep = rollout(spec, seed, record=False)
     return {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
 
 
-def _map(fn, jobs, workers: int):
-    if workers <= 1 or len(jobs) <= 1:
-        return [fn(j) for j in jobs]
-    ctx = multiprocessing.get_context("spawn")
-    with ctx.Pool(min(workers, len(jobs))) as pool:
-        return pool.map(fn, jobs, chunksize=1)
+def _imap(fn, jobs, workers: int, ray=None):
+    """``fn(job)`` for every job, yielded as each finishes: here (one worker), on a pool
+    of spawned processes, or on ``ray`` (a :class:`cake_drake.sweeps.RayCluster`)."""
+    if ray is not None:
+        yield from ray.imap(fn, jobs)
+    elif workers <= 1 or len(jobs) <= 1:
+        yield from (fn(j) for j in jobs)
+    else:
+        ctx = multiprocessing.get_context("spawn")
+        with ctx.Pool(min(workers, len(jobs))) as pool:
+            yield from pool.imap_unordered(fn, jobs, chunksize=1)
+
+
+def _map(fn, jobs, workers: int, ray=None) -> list:
+    """:func:`_imap`'s answers in the order of ``jobs`` (each answer has its ``seed``)."""
+    answers = list(_imap(fn, jobs, workers, ray))
+    order = {job[1]: k for k, job in enumerate(jobs)}
+    return sorted(answers, key=lambda a: order[a["seed"]])
 
 
 # --- record -------------------------------------------------------------------------------
 
 
-def record(spec: EpisodeSpec, out: Path, seeds: list[int], workers: int, resume: bool) -> dict:
-    """Record ``seeds``' episodes into the dataset at ``out`` (see the module)."""
+def record(
+    spec: EpisodeSpec, out: Path, seeds: list[int], workers: int, resume: bool, ray=None
+) -> dict:
+    """Record ``seeds``' episodes into the dataset at ``out`` (see the module), on a local
+    pool of ``workers`` or on ``ray``; each is kept by this process as it finishes."""
     from cake_drake.outputs.files import check_output_folder, claim_folder
     from cake_drake.policy import dataset
 
@@ -125,7 +147,8 @@ def record(spec: EpisodeSpec, out: Path, seeds: list[int], workers: int, resume:
     cache.mkdir(exist_ok=True)
     done = {int(p.stem[3:]) for p in cache.glob("ep_*.json")} if resume else set()
     todo = [s for s in seeds if s not in done]
-    _map(_record_one, [(spec, s, str(cache)) for s in todo], workers)
+    for ep in _imap(_record_one, [(spec, s) for s in todo], workers, ray):
+        _keep(ep, cache)
     rows = [json.loads((cache / f"ep_{s}.json").read_text()) for s in seeds]
     kept = [r for r in rows if r["success"] and (cache / f"ep_{r['seed']}.npz").is_file()]
     staging = real / f".staging-{os.getpid()}"
@@ -211,9 +234,9 @@ def _spec_from_json(d: dict) -> EpisodeSpec:
 # --- replay -------------------------------------------------------------------------------
 
 
-def _replay_one(args) -> bool:
+def _replay_one(args) -> dict:
     spec, seed, actions = args
-    return replay(spec, seed, actions)
+    return {"seed": seed, "rebuilt": replay(spec, seed, actions)}
 
 
 def replay_check(root: Path, workers: int) -> dict:
@@ -229,16 +252,19 @@ def replay_check(root: Path, workers: int) -> dict:
     jobs = [
         (spec, seed, dataset.episode_actions(data, k)) for k, seed in enumerate(report["seeds"])
     ]
-    rebuilt = _map(_replay_one, jobs, workers)
+    rebuilt = [a["rebuilt"] for a in _map(_replay_one, jobs, workers)]
     return {"episodes": len(jobs), "rebuilt": sum(rebuilt), "per_episode": rebuilt}
 
 
 # --- evaluate -----------------------------------------------------------------------------
 
 
-def evaluate(spec: EpisodeSpec, seeds: list[int], workers: int) -> tuple[list[dict], dict]:
-    """Rows (one per episode) and the summary of ``spec.policy`` over ``seeds``."""
-    rows = _map(_evaluate_one, [(spec, s) for s in seeds], workers)
+def evaluate(
+    spec: EpisodeSpec, seeds: list[int], workers: int, ray=None
+) -> tuple[list[dict], dict]:
+    """Rows (one per episode, in seed order) and the summary of ``spec.policy`` over
+    ``seeds``, on a local pool or on ``ray``."""
+    rows = _map(_evaluate_one, [(spec, s) for s in seeds], workers, ray)
     wins = sum(r["success"] for r in rows)
     lo, hi = wilson(wins, len(rows))
     sizes = {}

@@ -182,6 +182,25 @@ class RayCluster:
         """Start or join Ray now, before the sweep writes anything."""
         self._init()
 
+    def imap(self, fn, items: Sequence) -> Iterator:
+        """``fn(item)`` for every item, each on a Ray worker (one CPU each), yielded as
+        they finish (for work that is not a sweep's runs: episodes)."""
+        ray = self._init()
+        remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+        running = [remote.remote(item) for item in items]
+        try:
+            while running:
+                ready, running = ray.wait(running, num_returns=1)
+                yield ray.get(ready[0])
+        except BaseException:
+            for ref in running:
+                ray.cancel(ref, force=True)
+            raise
+        finally:
+            if self._started:
+                ray.shutdown()
+                self._started = False
+
     def events(self, jobs: Sequence[dict]) -> Iterator[Event]:
         ray = self._init()
         remote = ray.remote(num_cpus=1, max_retries=0)(execute)
