@@ -27,7 +27,12 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder, System
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
-from cake_drake.dynamic.controllers import Controller, limit_torque, make_controller
+from cake_drake.dynamic.controllers import (
+    Controller,
+    gravity_term,
+    limit_torque,
+    make_controller,
+)
 from cake_drake.dynamic.reference import ReferenceTrajectory
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.free_space import FreeSpace
@@ -349,6 +354,9 @@ def build_diagram(
         "tau_commanded": LogVectorOutput(tau, builder, dt),
         "tau_applied": LogVectorOutput(plant.get_net_actuation_output_port(scene.arm), builder, dt),
         "tau_requested": LogVectorOutput(requested, builder, dt),
+        # g(q) of the measured arm, for the joint plot: logged as the run goes (C++)
+        # rather than computed row by row once it is over.
+        "gravity": LogVectorOutput(gravity_term(builder, scene), builder, dt),
     }
     for name in LOGGED_REFERENCE_PORTS:
         loggers[name] = LogVectorOutput(reference.port(name), builder, dt)

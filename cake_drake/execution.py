@@ -44,6 +44,7 @@ class Logs:
     tau_commanded: np.ndarray  # (N, 7) controller output
     tau_applied: np.ndarray  # (N, 7) net actuation on the arm joints (PD included)
     tau_requested: np.ndarray | None = None  # (N, 7) actuation asked of the arm, before limits
+    gravity: np.ndarray | None = None  # (N, 7) g(q): the torque that holds the arm still
 
     def saturation(self, limits) -> dict:
         """Per joint: the time (s) the torque sat at its limit, and the peak asked (N m).
@@ -117,6 +118,7 @@ def _logs(cake: CakeDiagram, context) -> Logs:
         tau_commanded=rows("tau_commanded").T,
         tau_applied=rows("tau_applied").T,
         tau_requested=rows("tau_requested").T if "tau_requested" in data else None,
+        gravity=rows("gravity").T if "gravity" in data else None,
     )
 
 

@@ -24,6 +24,7 @@ from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
 from cake_drake.plugins import PluginError, is_plugin, resolve
 from cake_drake.scenario import (
+    HELPER_CHOICES,
     Generate,
     Policy,
     Recorded,
@@ -136,6 +137,10 @@ def _check_numbers(s: Scenario) -> None:
         raise InputError(
             "motion.avoid_collisions needs motion.collision_check (--avoid-collisions "
             "cannot go with --no-collision-check)"
+        )
+    if s.outputs.helpers not in HELPER_CHOICES:
+        raise InputError(
+            f"outputs.helpers {s.outputs.helpers!r}; choose one of: " + ", ".join(HELPER_CHOICES)
         )
     _range(s.visualization.realtime_rate, 0.0, 100.0, "visualization.realtime_rate")
     _range(sim.settle_s, 0.0, 60.0, "simulation.settle_s", " s")
@@ -487,7 +492,9 @@ def run(
     if checked.out is not None:
         from cake_drake.outputs.worker import OutputWorker
 
-        worker = OutputWorker(blocks, initial, render=scenario.outputs.render)
+        worker = OutputWorker(
+            blocks, initial, render=scenario.outputs.render, helpers=scenario.outputs.helpers
+        )
     try:
         # A policy decides what to do; the plan still lays out the table as for the classical
         # run of the same task (and is recorded for comparison).

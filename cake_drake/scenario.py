@@ -150,10 +150,18 @@ class Simulation:
     step_budget_s: float = 60.0
 
 
+#: ``outputs.helpers``: fork the output helpers when a core is free, always, or never.
+HELPER_CHOICES = ("auto", "always", "never")
+
+
 @dataclass
 class Outputs:
     folder: str = "outputs"
     render: bool = True  # final_state.png
+    #: Draw the picture and the plot in helper processes that overlap the simulation:
+    #: ``auto`` when a core is free (a busy machine gains nothing from them), ``always``
+    #: or ``never``. The files are the same either way.
+    helpers: str = "auto"
 
 
 @dataclass

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -256,3 +258,53 @@ def test_the_joint_plot_marks_each_fault_when_it_struck():
     logs = SimpleNamespace(t=np.arange(0, 5, 0.5), action=np.array([-1, 0, 0, 1, 1, 2, 2, 2, 3, 3]))
     marks = fault_marks([Knock(cube="c", time=1.2), Move(cube="a", time=3.0), Slip(action=3)], logs)
     assert marks == [(1.2, "knock c"), (3.0, "move a"), (2.5, "slip (action 3)")]
+
+
+def test_helpers_or_not_the_outputs_are_the_same_bytes(tmp_path):
+    """The picture and the plot drawn in helper processes (with the plot's figure
+    prepared ahead, see outputs.plots.joint_figure) or in the run's own process: the same
+    files, byte for byte (the timings in the summary and the plan aside)."""
+    written = {}
+    for helpers in ("always", "never"):
+        s = scenario("position", folder=str(tmp_path / helpers), helpers=helpers)
+        result = run(s)
+        assert result.success, result.message
+        written[helpers] = tmp_path / helpers
+    always, never = written["always"], written["never"]
+    for name in ("final_state.png", "joint4_torque.png", "trajectory.npz"):
+        assert (always / name).read_bytes() == (never / name).read_bytes(), name
+    timing = {"wall_s", "simulation_wall_s", "rtf", "stages_s", "ik_median_ms", "planner"}
+    a, b = (json.loads((d / "summary.json").read_text()) for d in (always, never))
+    assert {k: v for k, v in a.items() if k not in timing} == {
+        k: v for k, v in b.items() if k not in timing
+    }
+
+
+def test_no_helpers_are_forked_when_every_core_is_busy():
+    """outputs.helpers auto: with a task busy on every core, no core is spare."""
+    from cake_drake.outputs.worker import OutputWorker, spare_core
+
+    cores = len(os.sched_getaffinity(0))
+    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(cores)]
+    try:
+        time.sleep(0.3)
+        assert not spare_core()
+        worker = OutputWorker(["a"], {}, render=False, helpers="auto")
+        assert not worker.forked
+        worker.close()
+    finally:
+        for p in busy:
+            p.kill()
+            p.wait()
+
+
+def test_a_bad_helpers_choice_is_one_line_before_anything_runs(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("outputs:\n  helpers: sometimes\n")
+    command = ["--scenario", str(bad), "--out", str(tmp_path / "o")]
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", *command], capture_output=True, text=True
+    )
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "outputs.helpers 'sometimes'; choose one of: auto, always, never" in r.stderr
+    assert not (tmp_path / "o").exists()

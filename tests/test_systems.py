@@ -110,3 +110,43 @@ def test_waypoint_ik_executes_an_unstack_from_fixed_poses(waypoint_ik):
     assert X.translation()[2] > poses[1].translation()[2] + 0.03
     assert system.GetOutputPort("finger_state").Eval(context)[0] == pytest.approx(0.0)
     assert system.progress(context).error is None
+
+
+def _outcome(result) -> tuple:
+    """Everything a run leaves, down to the bit: every log, the final poses and arm, what
+    was executed and what the monitor recorded."""
+    e = result.execution
+    logs = {k: v.tobytes() for k, v in vars(e.logs).items() if v is not None}
+    poses = {k: X.GetAsMatrix4().tobytes() for k, X in e.poses.items()}
+    return logs, poses, e.q_final.tobytes(), e.actions, str(e.monitoring), e.error, e.sim_s
+
+
+@pytest.mark.slow
+def test_the_reference_tape_changes_no_bit_of_a_run(monkeypatch, tmp_path):
+    """WaypointIk reads each step's reference from the tape made at the last decision;
+    with no tape (every step's reference computed at that step) the runs are the same
+    bit for bit: the exercise in both modes, a knocked cube with its replans, a
+    generated problem."""
+    from cake_drake.pipeline import run
+    from cake_drake.scenario import Knock, Scenario, controller_for_mode
+    from cake_drake.symbolic import random_problem
+    from cake_drake.systems.waypoint_ik import Tape
+
+    problem = tmp_path / "p6.pddl"
+    problem.write_text(random_problem(6, seed=4))
+    cases = []
+    for mode, faults, task in [
+        ("position", [], None),
+        ("torque", [Knock("d", 1.0)], None),
+        ("torque", [], str(problem)),
+    ]:
+        s = Scenario(controller=controller_for_mode(mode), faults=faults)
+        if task is not None:
+            s.task.problem = task
+        cases.append(s)
+    taped = [run(s, write=False) for s in cases]
+    assert all(r.success for r in taped) and taped[1].execution.monitoring["replans"]
+    untaped = np.array([], float)
+    monkeypatch.setattr(WaypointIk, "_tape", lambda self, prog, t: Tape(0, untaped, untaped))
+    for s, with_tape in zip(cases, taped, strict=True):
+        assert _outcome(run(s, write=False)) == _outcome(with_tape)

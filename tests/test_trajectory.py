@@ -182,6 +182,22 @@ def test_gripper_ramps_during_holds_and_labels_follow(trajectory, samples):
     assert trajectory.labels(trajectory.end_time + 1.0)[2:] == (0, -1)  # idle afterwards
 
 
+def test_at_many_is_at_bit_for_bit(trajectory):
+    """The vectorised evaluation (WaypointIk's tape, trajectory.npz) repeats :meth:`at` row
+    by row exactly: the same bits, before the start, in blends, holds and ramps, past the
+    end, at the simulation's own step times (k * period)."""
+    traj = trajectory.copy()
+    traj.start_time = 0.05
+    ks = np.arange(0, round(traj.end_time / 0.01) + 40)
+    times = np.concatenate([ks * 0.01, [s.t0 for s in traj.segments], [traj.end_time]])
+    many = traj.at_many(times)
+    pairs = zip(traj.segments, traj.segments[1:], strict=False)
+    assert any(nxt.t0 < seg.end for seg, nxt in pairs)  # blends are among them
+    for i, t in enumerate(times):
+        for one, rows in zip(traj.at(float(t)), many, strict=True):
+            assert np.asarray(one, float).tobytes() == np.asarray(rows[i], float).tobytes(), t
+
+
 def test_npz_round_trip(samples, tmp_path):
     path = tmp_path / "trajectory.npz"
     actions = ["(unstack a b)", "(put-down a)", "(pick-up c)", "(stack c d)"]

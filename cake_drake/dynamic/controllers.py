@@ -187,6 +187,15 @@ def _gravity(scene: Scene) -> InverseDynamics:
     )
 
 
+def gravity_term(builder: DiagramBuilder, scene: Scene) -> OutputPort:
+    """g(q) of the measured arm, as a port (for the log the joint plot draws)."""
+    gravity = builder.AddNamedSystem("gravity_term", _gravity(scene))
+    builder.Connect(
+        scene.plant.get_state_output_port(scene.arm), gravity.get_input_port_estimated_state()
+    )
+    return gravity.get_output_port_generalized_force()
+
+
 def limit_torque(builder: DiagramBuilder, scene: Scene) -> OutputPort | None:
     """Clamp whatever drives the arm's actuation input to :data:`TORQUE_LIMITS`.
 

@@ -198,7 +198,12 @@ def write_outputs(
         + (f", Kp={gains['kp'][3]:g} Kd={gains['kd'][3]:g}" if torque_mode and gains else ""),
         tau_label="τ commanded" if torque_mode else "τ applied",
         extra_tau=[
-            (gravity_torques(cake.scene.control_plant, logs.q), "g(q): static gravity term")
+            (
+                logs.gravity
+                if logs.gravity is not None
+                else gravity_torques(cake.scene.control_plant, logs.q),
+                "g(q): static gravity term",
+            )
         ],
         marks=[(e["time_s"], e["kind"]) for e in execution.monitoring.get("events", [])],
         faults=fault_marks(result.faults, logs),

@@ -4,11 +4,13 @@ Building a VTK world and importing matplotlib together take about half as long a
 simulating the whole task. Two helpers are forked at the start of a run, one for the
 picture and one for the plot: while the main process plans and simulates, the first
 builds its :class:`Renderer` and renders once (the meshes load then), then the second
-imports the plotting code (one at a time, so that on two cores the simulation always
-has one to itself). At the end they get the final state and the logs and write
-``final_state.png`` and the joint plot side by side, while the main process writes the
-rest. Apart, each stays small (VTK and matplotlib never share a process). Where forking
-is not available, or a helper fails, the same functions run in-process.
+imports the plotting code and prepares the plot's figure (one at a time, so that on two
+cores the simulation always has one to itself). At the end they get the final state and
+the logs and write ``final_state.png`` and the joint plot side by side, while the main
+process writes the rest. Apart, each stays small (VTK and matplotlib never share a
+process). Helpers are forked only when a core is free for them (:func:`spare_core`): on
+a busy machine they would only compete with the simulation for the cores. Without them,
+where forking is not available, or when a helper fails, the same functions run in-process.
 """
 
 from __future__ import annotations
@@ -36,10 +38,10 @@ def render_png(blocks, poses, q_arm, fingers, path, renderer=None) -> None:
     save_png(renderer.render(poses, q_arm, fingers), path)
 
 
-def plot_png(job: dict) -> None:
+def plot_png(job: dict, figure=None) -> None:
     from cake_drake.outputs.plots import joint_plot
 
-    joint_plot(**job)
+    joint_plot(**job, figure=figure)
 
 
 def _warm_picture(blocks, warm_poses):
@@ -57,14 +59,18 @@ def _warm_picture(blocks, warm_poses):
 
 
 def _warm_plot():
-    """Import the plotting code (matplotlib) now, not at the end; returns the job handler.
+    """Import the plotting code (matplotlib) now, not at the end, and prepare the joint
+    plot's figure (drawn once, empty: see :func:`cake_drake.outputs.plots.joint_figure`);
+    returns the job handler."""
+    from cake_drake.outputs.plots import joint_figure
 
-    Only the import: drawing a first figure in advance (to an Agg canvas, or just
-    building one) made the real plot no faster, measured in fresh processes.
-    """
-    import cake_drake.outputs.plots  # noqa: F401
+    ready = [joint_figure(drawn=True)]  # for joint 4, the one a run plots
 
-    return plot_png
+    def handle(job: dict) -> None:
+        figure = ready.pop() if ready and job.get("joint", 4) == 4 else None
+        plot_png(job, figure)
+
+    return handle
 
 
 def _serve(conn, parent_end, warm, args, what: str, after, warmed) -> None:
@@ -168,15 +174,54 @@ class _Helper:
                 self.process.terminate()
 
 
+def _runnable() -> int:
+    """Tasks ready to run on the machine now, this one included (Linux's /proc/loadavg)."""
+    with open("/proc/loadavg") as f:
+        return int(f.read().split()[3].split("/")[0])
+
+
+def spare_core(samples: int = 8, gap_s: float = 0.0005) -> bool:
+    """Whether a core is free for the helpers besides this process's own: over a few
+    milliseconds, the fewest tasks ready to run (this process included) stays below the
+    cores this process may use. Where that cannot be read: assumed free.
+
+    On a busy machine, helpers compete with the simulation for the cores instead of
+    using an idle one: measured on two cores with a second run looping beside it, a run
+    with its outputs written in its own process after the simulation took 0.92x the time
+    of one with helpers (quiet, helpers take 0.80x, see docs/speed.md).
+    """
+    import os
+    import time
+
+    try:
+        cores = len(os.sched_getaffinity(0))
+        fewest = _runnable()
+        for _ in range(samples - 1):
+            time.sleep(gap_s)
+            fewest = min(fewest, _runnable())
+    except (OSError, ValueError, IndexError, AttributeError):
+        return True
+    return fewest < cores
+
+
 class OutputWorker:
     """Fork the helpers now, with the blocks and initial poses; hand over the picture and
-    the plot later."""
+    the plot later. ``helpers`` is ``outputs.helpers`` (auto, always or never); with
+    ``auto``, they are forked only when :func:`spare_core` finds a core free. Without
+    them the picture and the plot are drawn in this process when they are asked for."""
 
     def __init__(
-        self, blocks: Sequence[str], initial_poses: Mapping[str, RigidTransform], render: bool
+        self,
+        blocks: Sequence[str],
+        initial_poses: Mapping[str, RigidTransform],
+        render: bool,
+        helpers: str = "auto",
     ):
         self._blocks = list(blocks)
         self._picture = self._plot = None
+        self.forked = spare_core() if helpers == "auto" else helpers == "always"
+        if not self.forked:
+            return
         try:
             # One helper warms up at a time, so the simulation keeps a core to itself.
             warmed = mp.get_context("fork").Event() if render else None

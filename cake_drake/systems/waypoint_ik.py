@@ -66,6 +66,37 @@ class MotionSettings:
     feedback: bool = False
 
 
+#: Where each reference port's value sits in a row of :class:`Tape`.
+_SLICES = {}
+_at = 0
+for _name, _size in REFERENCE_PORTS.items():
+    _SLICES[_name] = slice(_at, _at + _size)
+    _at += _size
+
+
+@dataclass(frozen=True)
+class Tape:
+    """The reference at every step from the last decision until the trajectory ends, one
+    row per step (the ports' values side by side, see :data:`REFERENCE_PORTS`), computed
+    at once when the trajectory changes: between decisions a step only reads its row.
+    Past the last row the reference holds still (the trajectory has ended)."""
+
+    k0: int  # step index of the first row (its time is k0 * period)
+    times: np.ndarray
+    rows: np.ndarray
+
+    def row(self, t: float) -> np.ndarray | None:
+        """The row for time ``t``, or None when ``t`` is not one of the tape's steps."""
+        n = len(self.times)
+        if n and t > self.times[-1]:
+            return self.rows[-1]
+        i = int(np.searchsorted(self.times, t))
+        return self.rows[i] if i < n and self.times[i] == t else None
+
+    def __deepcopy__(self, memo):
+        return self
+
+
 @dataclass(frozen=True)
 class Progress:
     """Immutable snapshot of execution: Drake's state copies share it instead of copying."""
@@ -82,6 +113,7 @@ class Progress:
     error: str | None = None
     warnings: tuple[str, ...] = ()  # collisions found along the planned moves
     refused: Refusal = Refusal()  # the last action found infeasible before it started
+    tape: Tape | None = None  # the reference from the last change on (None: not yet made)
 
     def __deepcopy__(self, memo):
         return self
@@ -130,6 +162,7 @@ class WaypointIk(LeafSystem):
         self._ik = ik
         self._indices = world
         self._motion = motion
+        self._period = period
         self._action_port = self.DeclareAbstractInputPort(
             "action", AbstractValue.Make(ActionCommand(0, None))
         )
@@ -165,6 +198,20 @@ class WaypointIk(LeafSystem):
             "labels": np.array([float(phase), float(action)]),
         }
 
+    def _tape(self, prog: Progress, t: float) -> Tape:
+        """The reference at each step from ``t`` until the trajectory ends (one step past
+        it), every row equal to :meth:`_reference`'s at that step's time."""
+        h = self._period
+        k0 = round(t / h)
+        k1 = max(k0, int(prog.trajectory.end_time / h) + 1)
+        while k1 * h <= prog.trajectory.end_time:
+            k1 += 1
+        times = np.arange(k0, k1 + 1) * h
+        q, v, a, g, rate, phase, action = prog.trajectory.at_many(times)
+        done = np.full(len(times), float(prog.done))
+        rows = np.column_stack([q, v, a, g, g, rate, rate, done, phase, action]).astype(float)
+        return Tape(k0, times, rows)
+
     @property
     def checker(self) -> CollisionChecker | None:
         """What the planned moves are checked with, if anything."""
@@ -188,10 +235,15 @@ class WaypointIk(LeafSystem):
         t = context.get_time()
         prog: Progress = context.get_abstract_state(self._state_index).get_value()
         new = self._step(context, prog, t)
-        if new is not prog:
+        if new is not prog or new.tape is None:
+            new = replace(new, tape=self._tape(new, t))
             state.get_mutable_abstract_state(self._state_index).set_value(new)
-        for name, value in self._reference(new, t).items():
-            state.get_mutable_discrete_state(self._groups[name]).SetFromVector(value)
+        row = new.tape.row(t)
+        if row is None:  # stepped off the tape's grid (a caller's own step): compute it
+            values = self._reference(new, t)
+            row = np.concatenate([values[name] for name in REFERENCE_PORTS])
+        for name, group in self._groups.items():
+            state.get_mutable_discrete_state(group).SetFromVector(row[_SLICES[name]])
 
     def _step(self, context, prog: Progress, t: float) -> Progress:
         """The progress after this step's decisions (``prog`` itself when unchanged)."""
