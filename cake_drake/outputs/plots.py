@@ -49,7 +49,8 @@ def shade_phases(ax, spans) -> None:
             ax.add_collection(
                 PolyCollection(
                     boxes, facecolors=colour, linewidths=0, zorder=0, transform=transform
-                )
+                ),
+                autolim=False,
             )
 
 
