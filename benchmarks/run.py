@@ -1,7 +1,7 @@
 """Whole-process wall time of `python -m cake_drake.run`, per mode, with a stage breakdown,
 then the same runs side by side with the two peers.
 
-    python benchmarks/run.py [--repeats N] [--problem P] [--rounds R] [--peers DIR]
+    python benchmarks/run.py [--repeats N] [--problem P] [--rounds R] [--peers DIR] [--busy]
 
 Each run is a fresh process (interpreter start and imports included) writing every
 output (plan, trajectory, final-state picture, joint-4 plot, summary). Medians over
@@ -11,12 +11,19 @@ time of the run and its helpers, peak memory the largest single process of the r
 With the peers' folder present (default ../shared/peers beside the project), its
 compare.py then times cake_drake against the PyBullet version and the tuned Drake
 script in one paired run (A B C, A B C, ...) and prints the ratios.
+
+``--busy`` measures everything with a second job on the machine: a position-mode run of
+cake_drake in a loop, started before the first measurement and stopped after the last,
+so that every command, the peers' too, shares the cores with it.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -59,6 +66,26 @@ def one_run(mode: str, problem: str | None, extra: list[str]) -> dict:
     return summary
 
 
+@contextlib.contextmanager
+def second_job(on: bool):
+    """A cake_drake run in a loop, in its own process group, while the block runs."""
+    if not on:
+        yield
+        return
+    out = tempfile.mkdtemp()
+    run = f"{sys.executable} -m cake_drake.run --mode position --out {out} --quiet"
+    loop = subprocess.Popen(
+        ["sh", "-c", f"while true; do {run} >/dev/null 2>&1; done"],
+        cwd=ROOT,
+        start_new_session=True,
+    )
+    try:
+        yield
+    finally:
+        os.killpg(loop.pid, signal.SIGTERM)
+        loop.wait()
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--repeats", type=int, default=3)
@@ -70,11 +97,18 @@ def main() -> None:
         default=ROOT.parent / "shared" / "peers",
         help="folder with compare.py (default: ../shared/peers); missing: no comparison",
     )
+    p.add_argument("--busy", action="store_true", help="measure beside a second job (a loop)")
     args = p.parse_args()
+    with second_job(args.busy):
+        measure(args)
+
+
+def measure(args) -> None:
     # Time what `make` leaves behind: the package compiled (an editable install is not,
     # and where PYTHONDONTWRITEBYTECODE is set every run would compile it again).
     subprocess.run([sys.executable, "-m", "compileall", "-q", str(ROOT / "cake_drake")], check=True)
-    print(f"machine: {machine()}")
+    busy = " (beside a second job: a cake_drake run in a loop)" if args.busy else ""
+    print(f"machine: {machine()}{busy}")
     print(f"median of {args.repeats} runs per row; every run builds the tower (exit 0)\n")
     head = ["mode", "process s", "CPU s", "peak MiB", "sim s", "RTF"]
     head += [*[f"{s} s" for s in STAGES], "max err mrad"]
