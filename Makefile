@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 SYSTEM_PACKAGES := system-packages.txt
 
-.PHONY: run test lint bench clean venv system-packages-run system-packages-test
+.PHONY: run test notebooks lint bench clean venv system-packages-run system-packages-test
 
 # $(call ensure_packages,GOAL,GOALS): install the Debian packages system-packages.txt lists
 # for any of GOALS that are missing: as root, or with password-less sudo; otherwise stop at
@@ -66,6 +66,9 @@ run: system-packages-run $(BYTECODE)
 
 test: system-packages-test $(BYTECODE)
 	$(PY) -m pytest
+
+notebooks: system-packages-test $(BYTECODE)
+	$(PY) notebooks/refresh.py
 
 lint: $(BYTECODE)
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .

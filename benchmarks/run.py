@@ -72,13 +72,14 @@ def second_job(on: bool):
     if not on:
         yield
         return
-    out = tempfile.mkdtemp()
-    run = f"{sys.executable} -m cake_drake.run --mode position --out {out} --quiet"
-    loop = subprocess.Popen(
-        ["sh", "-c", f"while true; do {run} >/dev/null 2>&1; done"],
-        cwd=ROOT,
-        start_new_session=True,
+    run = [sys.executable, "-m", "cake_drake.run", "--mode", "position", "--quiet"]
+    run += ["--out", tempfile.mkdtemp()]
+    forever = (
+        "import subprocess, sys\n"
+        "while True:\n"
+        "    subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
     )
+    loop = subprocess.Popen([sys.executable, "-c", forever, *run], cwd=ROOT, start_new_session=True)
     try:
         yield
     finally:

@@ -1,4 +1,5 @@
-"""The notebooks run headless, error-free, in test mode; git holds them without outputs.
+"""The notebooks run headless, error-free, in test mode; git holds them with the outputs
+of their current code (``notebooks/refresh.py``, ``make notebooks``).
 
 Each notebook is executed with nbclient in a fresh temporary working directory with
 ``CAKE_DRAKE_QUICK=1`` (shorter simulations) and ``MPLBACKEND=Agg``. The helper that
@@ -33,16 +34,47 @@ def test_every_notebook_is_listed():
     assert sorted(p.stem for p in NOTEBOOKS_DIR.glob("*.ipynb")) == sorted(NOTEBOOKS)
 
 
+def _refresh_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("refresh", NOTEBOOKS_DIR / "refresh.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 @pytest.mark.parametrize("name", NOTEBOOKS)
-def test_notebook_is_committed_without_outputs(name):
+def test_notebook_is_stored_with_the_outputs_of_its_code(name):
     nb = _read(name)
     nbformat.validate(nb)
     code = [c for c in nb.cells if c.cell_type == "code"]
     assert code, f"{name} has no code cells"
-    dirty = [i for i, c in enumerate(nb.cells) if c.cell_type == "code"
-             and (c.execution_count is not None or c.outputs)]  # fmt: skip
-    assert not dirty, f"{name}: cells {dirty} keep outputs; clear them before committing"
+    assert any(c.outputs for c in code), f"{name} is stored without outputs"
+    assert _refresh_module().problems(nb) == [], f"{name}: run make notebooks"
     assert nb.metadata.get("kernelspec", {}).get("name") == "python3"
+
+
+def test_a_notebook_whose_code_changed_is_named_stale(tmp_path):
+    refresh = _refresh_module()
+    nb = _read("01_symbolic")
+    assert refresh.problems(nb) == []
+    cell = next(c for c in nb.cells if c.cell_type == "code")
+    cell.source += "\nprint('changed')"
+    assert refresh.problems(nb) == ["its code changed since its outputs were stored"]
+    cell.execution_count = None
+    assert "its cells were not all run, in order, in one session" in refresh.problems(nb)
+
+
+def test_the_check_command_as_documented():
+    import subprocess
+
+    r = subprocess.run(
+        [sys.executable, str(NOTEBOOKS_DIR / "refresh.py"), "--check"],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "5 notebooks stored with the outputs of their current code" in r.stdout
 
 
 @pytest.mark.parametrize("name", NOTEBOOKS)
