@@ -302,7 +302,7 @@ def test_a_dead_output_helper_is_reported_not_waited_for(tmp_path):
     exit code), not a helper that did not answer in time."""
     from cake_drake.outputs.worker import OutputWorker
 
-    worker = OutputWorker(["a"], {}, render=False)
+    worker = OutputWorker(["a"], {}, render=False, helpers="always")
     try:
         worker._plot.process.kill()
         worker._plot.process.join(5)
