@@ -118,7 +118,7 @@ def _logs(cake: CakeDiagram, context) -> Logs:
         tau_commanded=rows("tau_commanded").T,
         tau_applied=rows("tau_applied").T,
         tau_requested=rows("tau_requested").T if "tau_requested" in data else None,
-        gravity=rows("gravity").T if "gravity" in data else None,
+        gravity=rows("gravity").T,
     )
 
 

@@ -147,6 +147,6 @@ def test_the_reference_tape_changes_no_bit_of_a_run(monkeypatch, tmp_path):
     taped = [run(s, write=False) for s in cases]
     assert all(r.success for r in taped) and taped[1].execution.monitoring["replans"]
     untaped = np.array([], float)
-    monkeypatch.setattr(WaypointIk, "_tape", lambda self, prog, t: Tape(0, untaped, untaped))
+    monkeypatch.setattr(WaypointIk, "_tape", lambda self, prog, t: Tape(0.01, 0, untaped, untaped))
     for s, with_tape in zip(cases, taped, strict=True):
         assert _outcome(run(s, write=False)) == _outcome(with_tape)

@@ -197,14 +197,7 @@ def write_outputs(
         title=f"joint 4 (elbow), {controller.name} controller"
         + (f", Kp={gains['kp'][3]:g} Kd={gains['kd'][3]:g}" if torque_mode and gains else ""),
         tau_label="τ commanded" if torque_mode else "τ applied",
-        extra_tau=[
-            (
-                logs.gravity
-                if logs.gravity is not None
-                else gravity_torques(cake.scene.control_plant, logs.q),
-                "g(q): static gravity term",
-            )
-        ],
+        extra_tau=[(logs.gravity, "g(q): static gravity term")],
         marks=[(e["time_s"], e["kind"]) for e in execution.monitoring.get("events", [])],
         faults=fault_marks(result.faults, logs),
     )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
+from itertools import accumulate
 
 import numpy as np
 from pydrake.common.value import AbstractValue
@@ -66,12 +67,13 @@ class MotionSettings:
     feedback: bool = False
 
 
+def _slices(sizes: dict[str, int]) -> dict[str, slice]:
+    ends = accumulate(sizes.values())
+    return {name: slice(end - sizes[name], end) for name, end in zip(sizes, ends, strict=True)}
+
+
 #: Where each reference port's value sits in a row of :class:`Tape`.
-_SLICES = {}
-_at = 0
-for _name, _size in REFERENCE_PORTS.items():
-    _SLICES[_name] = slice(_at, _at + _size)
-    _at += _size
+_SLICES = _slices(REFERENCE_PORTS)
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,7 @@ class Tape:
     at once when the trajectory changes: between decisions a step only reads its row.
     Past the last row the reference holds still (the trajectory has ended)."""
 
+    period: float
     k0: int  # step index of the first row (its time is k0 * period)
     times: np.ndarray
     rows: np.ndarray
@@ -90,8 +93,8 @@ class Tape:
         n = len(self.times)
         if n and t > self.times[-1]:
             return self.rows[-1]
-        i = int(np.searchsorted(self.times, t))
-        return self.rows[i] if i < n and self.times[i] == t else None
+        i = round(t / self.period) - self.k0
+        return self.rows[i] if 0 <= i < n and self.times[i] == t else None
 
     def __deepcopy__(self, memo):
         return self
@@ -210,7 +213,7 @@ class WaypointIk(LeafSystem):
         q, v, a, g, rate, phase, action = prog.trajectory.at_many(times)
         done = np.full(len(times), float(prog.done))
         rows = np.column_stack([q, v, a, g, g, rate, rate, done, phase, action]).astype(float)
-        return Tape(k0, times, rows)
+        return Tape(h, k0, times, rows)
 
     @property
     def checker(self) -> CollisionChecker | None:
