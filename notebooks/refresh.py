@@ -50,30 +50,40 @@ def problems(nb) -> list[str]:
     return found
 
 
-def refresh(path: Path) -> None:
+def execute(nb, work: str | Path, quick: bool = False) -> None:
+    """Run ``nb`` in place in the folder ``work``: Agg backend, a fixed hash seed, the
+    kernel this interpreter, ``CAKE_DRAKE_QUICK=1`` when ``quick`` (the tests' mode).
+    Raises nbclient's CellExecutionError, naming the cell, on any error."""
     from nbclient import NotebookClient
 
-    nb = nbformat.read(path, as_version=4)
     env = {"MPLBACKEND": "Agg", "PYTHONHASHSEED": "0"}
     saved = {k: os.environ.get(k) for k in (*env, "CAKE_DRAKE_QUICK", "PATH")}
     os.environ.update(env)
-    os.environ.pop("CAKE_DRAKE_QUICK", None)
+    if quick:
+        os.environ["CAKE_DRAKE_QUICK"] = "1"
+    else:
+        os.environ.pop("CAKE_DRAKE_QUICK", None)
     # The kernel is this interpreter (jupyter_client starts "python" from PATH).
     os.environ["PATH"] = str(Path(sys.executable).parent) + os.pathsep + os.environ["PATH"]
     try:
-        with tempfile.TemporaryDirectory() as work:
-            NotebookClient(
-                nb,
-                kernel_name="python3",
-                timeout=CELL_TIMEOUT_S,
-                resources={"metadata": {"path": work}},
-            ).execute()
+        NotebookClient(
+            nb,
+            kernel_name="python3",
+            timeout=CELL_TIMEOUT_S,
+            resources={"metadata": {"path": str(work)}},
+        ).execute()
     finally:
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
+
+
+def refresh(path: Path) -> None:
+    nb = nbformat.read(path, as_version=4)
+    with tempfile.TemporaryDirectory() as work:
+        execute(nb, work)
     for cell in nb.cells:  # nothing that changes from one refresh to the next but outputs
         cell.metadata.pop("execution", None)
     nb.metadata.setdefault("cake_drake", {})["code_sha256"] = code_sha256(nb)

@@ -8,9 +8,7 @@ draws the Diagram (:mod:`cake_drake.outputs.graph`) is tested here too.
 
 from __future__ import annotations
 
-import os
 import shutil
-import sys
 from pathlib import Path
 
 import nbformat
@@ -21,7 +19,6 @@ from cake_drake.outputs.graph import diagram_svg, graphviz_svg, ports_text
 
 NOTEBOOKS_DIR = Path(__file__).resolve().parent.parent / "notebooks"
 NOTEBOOKS = ("01_symbolic", "02_diagram", "03_computed_torque", "04_recovery", "05_policy")
-CELL_TIMEOUT_S = 300
 
 needs_dot = pytest.mark.skipif(shutil.which("dot") is None, reason="Graphviz dot not installed")
 
@@ -65,18 +62,6 @@ def test_a_notebook_whose_code_changed_is_named_stale(tmp_path):
     assert "its cells were not all run, in order, in one session" in refresh.problems(nb)
 
 
-def test_the_check_command_as_documented():
-    import subprocess
-
-    r = subprocess.run(
-        [sys.executable, str(NOTEBOOKS_DIR / "refresh.py"), "--check"],
-        capture_output=True,
-        text=True,
-    )
-    assert r.returncode == 0, r.stderr
-    assert "5 notebooks stored with the outputs of their current code" in r.stdout
-
-
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_notebook_documents_quick_mode(name):
     first = _read(name).cells[0]
@@ -87,8 +72,6 @@ def test_notebook_documents_quick_mode(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", NOTEBOOKS)
 def test_notebook_runs(name, tmp_path, monkeypatch):
-    from nbclient import NotebookClient
-
     nb = _read(name)
     # After the notebook: Meshcat must have stayed off (it is opt-in, never started in CI).
     nb.cells.append(
@@ -96,20 +79,9 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
             "assert not globals().get('USE_MESHCAT', False), 'Meshcat is on by default'"
         )
     )
-    monkeypatch.setenv("CAKE_DRAKE_QUICK", "1")
-    monkeypatch.setenv("MPLBACKEND", "Agg")
-    monkeypatch.setenv("PYTHONHASHSEED", "0")
-    # The kernel is the venv's python (jupyter_client runs "python" as sys.executable).
-    monkeypatch.setenv("PATH", str(Path(sys.executable).parent) + os.pathsep + os.environ["PATH"])
     monkeypatch.chdir(tmp_path)
     before = sorted(NOTEBOOKS_DIR.iterdir())
-    client = NotebookClient(
-        nb,
-        kernel_name="python3",
-        timeout=CELL_TIMEOUT_S,
-        resources={"metadata": {"path": str(tmp_path)}},
-    )
-    client.execute()  # raises CellExecutionError, naming the cell, on any error
+    _refresh_module().execute(nb, tmp_path, quick=True)  # raises on any error, naming the cell
 
     errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if o.output_type == "error"]  # fmt: skip
