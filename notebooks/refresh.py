@@ -4,10 +4,11 @@
     python notebooks/refresh.py --check        (exit 1 naming a notebook that is stale)
 
 Each notebook runs in full (not in the tests' quick mode) in a fresh temporary folder,
-with the Agg backend and a fixed hash seed, and is written back with its outputs. Its
-metadata then records a fingerprint of its code cells (``cake_drake.code_sha256``):
-``--check`` fails for a notebook whose code changed since it was last run, or that has a
-cell without outputs run in order, or an error among its outputs. The tests run
+with matplotlib's inline backend and a fixed hash seed, and is written back with its
+outputs. Its metadata then records a fingerprint of its code cells
+(``cake_drake.code_sha256``): ``--check`` fails for a notebook whose code changed since
+it was last run, or that has a cell without outputs run in order, or an error among its
+outputs. The tests run
 ``--check`` and, separately, execute every notebook in quick mode.
 """
 
@@ -51,12 +52,14 @@ def problems(nb) -> list[str]:
 
 
 def execute(nb, work: str | Path, quick: bool = False) -> None:
-    """Run ``nb`` in place in the folder ``work``: Agg backend, a fixed hash seed, the
-    kernel this interpreter, ``CAKE_DRAKE_QUICK=1`` when ``quick`` (the tests' mode).
+    """Run ``nb`` in place in the folder ``work``: a fixed hash seed, the kernel this
+    interpreter; with ``quick`` (the tests' mode) ``CAKE_DRAKE_QUICK=1`` and matplotlib's
+    Agg backend (nothing to show), else the inline backend (pyplot figures are stored).
     Raises nbclient's CellExecutionError, naming the cell, on any error."""
     from nbclient import NotebookClient
 
-    env = {"MPLBACKEND": "Agg", "PYTHONHASHSEED": "0"}
+    backend = "Agg" if quick else "module://matplotlib_inline.backend_inline"
+    env = {"MPLBACKEND": backend, "PYTHONHASHSEED": "0"}
     saved = {k: os.environ.get(k) for k in (*env, "CAKE_DRAKE_QUICK", "PATH")}
     os.environ.update(env)
     if quick:
