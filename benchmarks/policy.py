@@ -26,6 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import gymnasium  # noqa: E402
 from machine import machine  # noqa: E402 - benchmarks/machine.py
 
+from cake_drake.learning.evaluation import wilson  # noqa: E402
+
 ENV_ID = "cake_drake.gym:CakeDrake/Stack-v0"
 CHUNK = {"horizon": 10, "execute": 5}
 
@@ -117,14 +119,6 @@ def main() -> None:
             f"{policy:<16} {sum(won)}/{len(won)} = {np.mean(won):.0%} "
             f"(95 % interval {lo:.0%} to {hi:.0%}), median {int(np.median(steps))} steps"
         )
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """The Wilson score interval of a success rate k / n (sound at 0 % and 100 % too)."""
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 if __name__ == "__main__":

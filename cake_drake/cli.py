@@ -858,8 +858,8 @@ def _workers(n: int | None) -> int:
 
 
 def main_record(argv: list[str] | None = None) -> int:
-    from cake_drake.policy import dataset
-    from cake_drake.policy.recording import record, replay_check, spec_from_scenario
+    from cake_drake.learning import dataset
+    from cake_drake.learning.recording import record, replay_check, spec_from_scenario
     from cake_drake.scenario import load_scenario
 
     args = record_parser().parse_args(argv)
@@ -922,8 +922,9 @@ def evaluate_parser() -> argparse.ArgumentParser:
 def main_evaluate(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
+    from cake_drake.learning.evaluation import evaluate
+    from cake_drake.learning.recording import spec_from_scenario
     from cake_drake.outputs.files import OutputDir
-    from cake_drake.policy.recording import evaluate, spec_from_scenario
     from cake_drake.scenario import load_scenario
 
     args = evaluate_parser().parse_args(argv)

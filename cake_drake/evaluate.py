@@ -1,7 +1,7 @@
 """``python -m cake_drake.evaluate POLICY --suite SPEC``: a policy's success rate, measured.
 
 The argument parsing lives in :mod:`cake_drake.cli`; the library is
-:mod:`cake_drake.policy.recording`.
+:mod:`cake_drake.learning.recording`.
 """
 
 import sys

@@ -79,7 +79,7 @@ def recorded(tmp_path_factory):
 @needs_lerobot
 @pytest.mark.slow
 def test_a_recording_is_a_lerobot_dataset_lerobot_reads(recorded):
-    from cake_drake.policy.dataset import read
+    from cake_drake.learning.dataset import read
 
     folder, runs = recorded
     assert "2/2 episodes recorded" in runs["1"].stdout, runs["1"].stdout
@@ -115,7 +115,7 @@ def report_task(folder: Path, seed: int) -> str:
 @needs_lerobot
 @pytest.mark.slow
 def test_decoded_frames_match_the_rendered_ones_within_codec_tolerance(recorded):
-    from cake_drake.policy.dataset import read
+    from cake_drake.learning.dataset import read
 
     folder, _ = recorded
     report = json.loads((folder / "ds1" / "report.json").read_text())
@@ -179,7 +179,7 @@ def test_resume_records_only_the_rest_and_a_recording_is_not_reused_without_it(r
     after = {p.name: p.stat().st_mtime_ns for p in (folder / "ds1" / "episodes").glob("ep_*")}
     assert all(after[n] == t for n, t in kept.items())  # the first two were not recorded again
     assert len(after) > len(kept)
-    from cake_drake.policy.dataset import read
+    from cake_drake.learning.dataset import read
 
     assert read(folder / "ds1").meta.total_episodes == 3
 

@@ -1,2 +1,4 @@
-"""The learned layer's slot: what a policy sees, how its actions are read, and the
-Gymnasium environment built on the same Diagram (:mod:`cake_drake.gym`)."""
+"""The learned layer's slot, as the Diagram sees it: what a policy observes
+(:mod:`~cake_drake.policy.observations`) and what its action means
+(:mod:`~cake_drake.policy.spaces`). Episodes, datasets, training and evaluation live one
+layer up, in :mod:`cake_drake.learning`."""

@@ -41,7 +41,7 @@ class EpisodeSpec:
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
 
     def env(self):
-        from cake_drake.gym import StackEnv
+        from cake_drake.learning.env import StackEnv
 
         return StackEnv(
             blocks=self.blocks,

@@ -1,34 +1,29 @@
-"""Recording demonstrations, replaying them, evaluating policies: loops of episodes.
+"""Recording demonstrations and replaying them: loops of episodes.
 
 ``record``: episodes of a demonstrator policy (the classical cake as a policy by default)
 on seeded problems, each finished episode kept at once in ``OUT/episodes/`` (so an
 interrupted recording keeps what finished and ``resume`` runs only the rest); the
 successful ones then become one LeRobot dataset in ``OUT`` (``meta/``, ``data/``,
-``videos/``: :mod:`cake_drake.policy.dataset`), written in seed order whatever the
+``videos/``: :mod:`cake_drake.learning.dataset`), written in seed order whatever the
 workers, and ``OUT/report.json`` says what was recorded and why the others failed.
 
 ``replay_check``: every episode's actions fed open loop through the same environment
 from the same seed; the fraction that builds the goal again.
-
-``evaluate``: a policy over seeded problems; success with a 95 % Wilson interval, per
-problem size, steps, time and the reasons episodes ended.
 """
 
 from __future__ import annotations
 
 import json
-import math
-import multiprocessing
 import os
 import shutil
-from collections import Counter
 from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
 from cake_drake.errors import InputError, OutputError
-from cake_drake.policy.rollout import EXPERT, Episode, EpisodeSpec, replay, rollout
+from cake_drake.learning.parallel import imap, map_ordered
+from cake_drake.learning.rollout import EXPERT, Episode, EpisodeSpec, replay, rollout
 
 RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 
@@ -64,16 +59,6 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
     return spec
 
 
-def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """The 95 % Wilson score interval of a success rate."""
-    if n == 0:
-        return 0.0, 1.0
-    p = successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
 # --- workers ------------------------------------------------------------------------------
 
 
@@ -97,33 +82,6 @@ def _keep(ep: Episode, folder: Path) -> dict:
     return row
 
 
-def _evaluate_one(args) -> dict:
-    """One episode's row, no frames (run in a worker)."""
-    spec, seed = args
-    ep = rollout(spec, seed, record=False)
-    return {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
-
-
-def _imap(fn, jobs, workers: int, ray=None):
-    """``fn(job)`` for every job, yielded as each finishes: here (one worker), on a pool
-    of spawned processes, or on ``ray`` (a :class:`cake_drake.sweeps.RayCluster`)."""
-    if ray is not None:
-        yield from ray.imap(fn, jobs)
-    elif workers <= 1 or len(jobs) <= 1:
-        yield from (fn(j) for j in jobs)
-    else:
-        ctx = multiprocessing.get_context("spawn")
-        with ctx.Pool(min(workers, len(jobs))) as pool:
-            yield from pool.imap_unordered(fn, jobs, chunksize=1)
-
-
-def _map(fn, jobs, workers: int, ray=None) -> list:
-    """:func:`_imap`'s answers in the order of ``jobs`` (each answer has its ``seed``)."""
-    answers = list(_imap(fn, jobs, workers, ray))
-    order = {job[1]: k for k, job in enumerate(jobs)}
-    return sorted(answers, key=lambda a: order[a["seed"]])
-
-
 # --- record -------------------------------------------------------------------------------
 
 
@@ -132,8 +90,8 @@ def record(
 ) -> dict:
     """Record ``seeds``' episodes into the dataset at ``out`` (see the module), on a local
     pool of ``workers`` or on ``ray``; each is kept by this process as it finishes."""
+    from cake_drake.learning import dataset
     from cake_drake.outputs.files import check_output_folder, claim_folder
-    from cake_drake.policy import dataset
 
     dataset.require_lerobot()
     dataset.features(spec.control_mode, spec.cameras)  # a mode that cannot be recorded
@@ -147,7 +105,7 @@ def record(
     cache.mkdir(exist_ok=True)
     done = {int(p.stem[3:]) for p in cache.glob("ep_*.json")} if resume else set()
     todo = [s for s in seeds if s not in done]
-    for ep in _imap(_record_one, [(spec, s) for s in todo], workers, ray):
+    for ep in imap(_record_one, [(spec, s) for s in todo], workers, ray):
         _keep(ep, cache)
     rows = [json.loads((cache / f"ep_{s}.json").read_text()) for s in seeds]
     kept = [r for r in rows if r["success"] and (cache / f"ep_{r['seed']}.npz").is_file()]
@@ -241,7 +199,7 @@ def _replay_one(args) -> dict:
 
 def replay_check(root: Path, workers: int) -> dict:
     """Replay every episode of the dataset at ``root`` open loop (see the module)."""
-    from cake_drake.policy import dataset
+    from cake_drake.learning import dataset
 
     report_path = root / "report.json"
     if not report_path.is_file():
@@ -252,36 +210,5 @@ def replay_check(root: Path, workers: int) -> dict:
     jobs = [
         (spec, seed, dataset.episode_actions(data, k)) for k, seed in enumerate(report["seeds"])
     ]
-    rebuilt = [a["rebuilt"] for a in _map(_replay_one, jobs, workers)]
+    rebuilt = [a["rebuilt"] for a in map_ordered(_replay_one, jobs, workers)]
     return {"episodes": len(jobs), "rebuilt": sum(rebuilt), "per_episode": rebuilt}
-
-
-# --- evaluate -----------------------------------------------------------------------------
-
-
-def evaluate(
-    spec: EpisodeSpec, seeds: list[int], workers: int, ray=None
-) -> tuple[list[dict], dict]:
-    """Rows (one per episode, in seed order) and the summary of ``spec.policy`` over
-    ``seeds``, on a local pool or on ``ray``."""
-    rows = _map(_evaluate_one, [(spec, s) for s in seeds], workers, ray)
-    wins = sum(r["success"] for r in rows)
-    lo, hi = wilson(wins, len(rows))
-    sizes = {}
-    for n in sorted({r["blocks"] for r in rows}):
-        sub = [r for r in rows if r["blocks"] == n]
-        k = sum(r["success"] for r in sub)
-        sizes[str(n)] = {"episodes": len(sub), "success": k, "ci95": list(wilson(k, len(sub)))}
-    summary = {
-        "policy": spec.policy,
-        "control_mode": spec.control_mode,
-        "episodes": len(rows),
-        "success": wins,
-        "rate": wins / len(rows) if rows else 0.0,
-        "ci95": [lo, hi],
-        "per_size": sizes,
-        "mean_steps": float(np.mean([r["steps"] for r in rows])) if rows else 0.0,
-        "mean_wall_s": float(np.mean([r["wall_s"] for r in rows])) if rows else 0.0,
-        "reasons": dict(Counter(r["reason"] for r in rows)),
-    }
-    return rows, summary

@@ -96,7 +96,7 @@ def _quiet():
 
 
 def write(root: Path, episodes: Iterable, fps: float, control_mode: str, cameras) -> int:
-    """Write ``episodes`` (:class:`cake_drake.policy.rollout.Episode`, with frames) as a new
+    """Write ``episodes`` (:class:`cake_drake.learning.rollout.Episode`, with frames) as a new
     dataset at ``root`` (which must not exist); the number of frames written."""
     require_lerobot()
     from lerobot.datasets.lerobot_dataset import LeRobotDataset

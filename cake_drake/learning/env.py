@@ -1,0 +1,226 @@
+"""``CakeDrake/Stack-v0``: the Blocksworld task as a Gymnasium environment.
+
+A thin face over the same Diagram a run builds: each ``reset(seed=...)`` draws a problem
+(a generated Blocksworld of ``blocks`` cubes, or the given PDDL problem), lays it out as a
+run would, and builds the Diagram with a ``!Policy`` reference whose policy is this
+environment: ``step(action)`` holds the action for one control period (``1 / rate_hz``
+simulated seconds) and returns what the policy slot observes.
+
+- ``control_mode``: an action space of :mod:`cake_drake.policy.spaces` (``ee_delta``,
+  ``joint_position``, ``joint_chunk``); a ``joint_chunk`` step executes ``execute`` rows
+  of the chunk (``execute`` control periods).
+- ``obs_mode``: ``state`` (``state``: joints, gripper width, joint velocities and the grasp
+  frame's pose, 22 numbers; ``cubes``: 12 rows of cube poses, zero past the problem's
+  cubes), ``rgb`` (``images``: one RGB image per camera) or ``state+rgb``.
+- a generated problem whose goal already holds is drawn again (the same seed always
+  gives the same problem).
+- reward: the fraction of the goal's facts measured true in the world; ``info`` has
+  ``is_success`` (every goal fact true, every stacked cube within 5 mm of the one below),
+  the English instruction ``task`` and the ``goal`` facts.
+- ``terminated`` on success, or when a cube has left the table (the world cannot be
+  recovered); ``truncated`` after ``max_steps`` steps.
+
+Drake's own ``pydrake.gym.DrakeGymEnv`` wraps one fixed Diagram; here each reset may bring
+a different number of cubes, so a new Diagram is built per reset.
+
+    import gymnasium
+    env = gymnasium.make("cake_drake.gym:CakeDrake/Stack-v0", control_mode="ee_delta")
+"""
+
+from __future__ import annotations
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces as gs
+from pydrake.systems.analysis import Simulator
+
+from cake_drake.errors import InputError
+from cake_drake.execution import STACK_TOL
+from cake_drake.policy import spaces
+from cake_drake.world.cameras import Camera, default_cameras
+
+OBS_MODES = ("state", "rgb", "state+rgb")
+MAX_CUBES = 12
+STATE_SIZE = 22
+
+
+class HeldAction:
+    """The policy the Diagram asks: it answers with the action the environment was given."""
+
+    action = None
+
+    def reset(self, task, seed) -> None:
+        pass
+
+    def act(self, observation):
+        return self.action
+
+
+class StackEnv(gymnasium.Env):
+    """See the module's docstring."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        blocks: int | tuple[int, int] = (3, 8),
+        problem: str | None = None,
+        obs_mode: str = "state",
+        control_mode: str = "ee_delta",
+        cameras: list[Camera] | None = None,
+        rate_hz: float = 10.0,
+        max_steps: int = 1200,
+        time_step: float = 0.01,
+        options: dict | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        from cake_drake.geometric.ik import Kinematics
+
+        if obs_mode not in OBS_MODES:
+            raise InputError(f"obs_mode {obs_mode!r}; choose one of: {', '.join(OBS_MODES)}")
+        self.options = dict(options or {})
+        spaces.check_space(control_mode, self.options)
+        lo, hi = (blocks, blocks) if isinstance(blocks, int) else blocks
+        if not 1 <= lo <= hi <= MAX_CUBES:
+            raise InputError(f"blocks {blocks!r}: from 1 to {MAX_CUBES} cubes")
+        self.blocks, self.problem = (lo, hi), problem
+        self.obs_mode, self.control_mode = obs_mode, control_mode
+        self.cameras = (
+            (default_cameras() if cameras is None else cameras) if "rgb" in obs_mode else []
+        )
+        self.rate_hz, self.max_steps, self.time_step = rate_hz, max_steps, time_step
+        self.render_mode = render_mode
+        kin = Kinematics()
+        low, high = spaces.bounds(control_mode, self.options, kin.lower, kin.upper)
+        self.action_space = gs.Box(
+            low.astype(np.float32), high.astype(np.float32), dtype=np.float32
+        )
+        parts = {}
+        if "state" in obs_mode:
+            parts["state"] = gs.Box(-np.inf, np.inf, (STATE_SIZE,), np.float32)
+            parts["cubes"] = gs.Box(-np.inf, np.inf, (MAX_CUBES, 7), np.float32)
+        if "rgb" in obs_mode:
+            parts["images"] = gs.Dict(
+                {c.name: gs.Box(0, 255, (c.height, c.width, 3), np.uint8) for c in self.cameras}
+            )
+        self.observation_space = gs.Dict(parts)
+        self._simulator = None
+
+    # --- the episode --------------------------------------------------------------------
+
+    def _scenario(self, seed: int):
+        from cake_drake.scenario import Generate, Policy, Scenario
+
+        s = Scenario()
+        if self.problem is None:
+            n = int(self.np_random.integers(self.blocks[0], self.blocks[1] + 1))
+            s.task.generate = Generate(blocks=n, seed=seed)
+        else:
+            s.task.problem = self.problem
+        s.reference = Policy(
+            factory="cake_drake.learning.env:HeldAction",
+            action_space=self.control_mode,
+            rate_hz=self.rate_hz,
+            max_steps=self.max_steps,
+            options=self.options,
+        )
+        s.world.time_step = self.time_step
+        s.cameras = list(self.cameras)
+        s.outputs.render = False
+        s.seed = seed
+        return s
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        from cake_drake.diagram import build_diagram
+        from cake_drake.pipeline import check, plan_and_layout
+        from cake_drake.symbolic.roles import blocksworld_view
+
+        super().reset(seed=seed)
+        episode_seed = int(self.np_random.integers(0, 2**31 - 1))
+        for _ in range(100):  # a generated goal that already holds is no episode: draw again
+            scenario = self._scenario(episode_seed)
+            checked = check(scenario, write=False)
+            view = blocksworld_view(checked.problem)
+            if self.problem is not None or not view.goal <= view.init:
+                break
+            episode_seed = int(self.np_random.integers(0, 2**31 - 1))
+        plan, slots, initial = plan_and_layout(checked)
+        self._held = HeldAction()
+        self._cake = build_diagram(
+            scenario, checked.problem, initial, plan.actions, slots=slots, policy=self._held
+        )
+        self._view = blocksworld_view(checked.problem)
+        self._source = self._cake.reference.policy
+        #: What a policy is told at its reset (a policy that plans reads the problem here).
+        self.policy_task = self._source.task
+        self._simulator = Simulator(self._cake.diagram)
+        self._simulator.Initialize()
+        self._steps = 0
+        return self._observe()
+
+    def step(self, action):
+        if self._simulator is None:
+            raise RuntimeError("call reset() before step()")
+        self._held.action = np.asarray(action, dtype=float)
+        context = self._simulator.get_context()
+        periods = int(self.options.get("execute", self.options.get("horizon", 10)))
+        periods = periods if self.control_mode == "joint_chunk" else 1
+        self._simulator.AdvanceTo(context.get_time() + periods / self.rate_hz)
+        self._steps += 1
+        obs, info = self._observe()
+        terminated = info["is_success"] or info["unrecoverable"]
+        truncated = not terminated and self._steps >= self.max_steps
+        return obs, info["reward"], terminated, truncated, info
+
+    def render(self):
+        if self.render_mode != "rgb_array" or self._simulator is None:
+            return None
+        from cake_drake.world.render import Renderer
+
+        poses, q, fingers = self._measured()
+        if not hasattr(self, "_renderer"):
+            self._renderer = Renderer(list(self._view.blocks), 640, 480)
+        return self._renderer.render(poses, q, fingers)[:, :, :3]
+
+    # --- what the agent sees ------------------------------------------------------------
+
+    def _measured(self):
+        scene = self._cake.scene
+        plant_context = scene.plant.GetMyContextFromRoot(self._simulator.get_context())
+        from cake_drake.world.scene import cube_poses
+
+        q = scene.plant.GetPositions(plant_context, scene.arm)
+        fingers = float(scene.plant.GetPositions(plant_context, scene.hand)[0])
+        return cube_poses(scene, plant_context), q, fingers
+
+    def _observe(self):
+        from cake_drake.world.facts import read_facts, stack_offsets
+
+        context = self._source.GetMyContextFromRoot(self._simulator.get_context())
+        o = self._source.observe(context)
+        obs = {}
+        if "state" in self.obs_mode:
+            obs["state"] = np.r_[
+                o["observation.state"], o["observation.velocity"], o["observation.ee_pose"]
+            ].astype(np.float32)
+            cubes = np.zeros((MAX_CUBES, 7), np.float32)
+            cubes[: len(o["cubes"])] = o["observation.cubes"]
+            obs["cubes"] = cubes
+        if "rgb" in self.obs_mode:
+            obs["images"] = {c.name: o[f"observation.images.{c.name}"] for c in self.cameras}
+        poses, _, fingers = self._measured()
+        reading = read_facts(poses, finger_opening=fingers)
+        goal = self._view.goal
+        true = goal & reading.facts
+        offsets = stack_offsets(poses, reading.facts)
+        loose = any(offsets.get(f[1], 0.0) > STACK_TOL for f in goal if f[0] == "on" and f in true)
+        info = {
+            "reward": len(true) / len(goal) if goal else 1.0,
+            "is_success": bool(true == goal and not loose),
+            "unrecoverable": any(X.translation()[2] < -0.05 for X in poses.values()),
+            "task": o["task"],
+            "goal": o["goal"],
+            "cubes": o["cubes"],
+            "steps": self._steps,
+        }
+        return obs, info

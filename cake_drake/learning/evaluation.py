@@ -1,0 +1,61 @@
+"""A policy's success rate, measured: episodes over seeded problems, with intervals.
+
+``evaluate``: a policy over seeded problems; success with a 95 % Wilson interval, per
+problem size, steps, time and the reasons episodes ended.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import asdict
+
+import numpy as np
+
+from cake_drake.learning.parallel import map_ordered
+from cake_drake.learning.rollout import EpisodeSpec, rollout
+
+
+def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The 95 % Wilson score interval of a success rate."""
+    if n == 0:
+        return 0.0, 1.0
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _evaluate_one(args) -> dict:
+    """One episode's row, no frames (run in a worker)."""
+    spec, seed = args
+    ep = rollout(spec, seed, record=False)
+    return {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
+
+
+def evaluate(
+    spec: EpisodeSpec, seeds: list[int], workers: int, ray=None
+) -> tuple[list[dict], dict]:
+    """Rows (one per episode, in seed order) and the summary of ``spec.policy`` over
+    ``seeds``, on a local pool or on ``ray``."""
+    rows = map_ordered(_evaluate_one, [(spec, s) for s in seeds], workers, ray)
+    wins = sum(r["success"] for r in rows)
+    lo, hi = wilson(wins, len(rows))
+    sizes = {}
+    for n in sorted({r["blocks"] for r in rows}):
+        sub = [r for r in rows if r["blocks"] == n]
+        k = sum(r["success"] for r in sub)
+        sizes[str(n)] = {"episodes": len(sub), "success": k, "ci95": list(wilson(k, len(sub)))}
+    summary = {
+        "policy": spec.policy,
+        "control_mode": spec.control_mode,
+        "episodes": len(rows),
+        "success": wins,
+        "rate": wins / len(rows) if rows else 0.0,
+        "ci95": [lo, hi],
+        "per_size": sizes,
+        "mean_steps": float(np.mean([r["steps"] for r in rows])) if rows else 0.0,
+        "mean_wall_s": float(np.mean([r["wall_s"] for r in rows])) if rows else 0.0,
+        "reasons": dict(Counter(r["reason"] for r in rows)),
+    }
+    return rows, summary
