@@ -879,7 +879,11 @@ def main_record(argv: list[str] | None = None) -> int:
     scenario = load_scenario(args.spec, args.name)
     spec = spec_from_scenario(scenario, args.policy)
     seeds = [scenario.seed + k for k in range(args.episodes)]
-    report = record(spec, args.out, seeds, workers, args.resume, _ray(args.ray, workers))
+    from dataclasses import asdict
+
+    ray = _ray(args.ray, workers)
+    training = asdict(scenario.training)
+    report = record(spec, args.out, seeds, workers, args.resume, ray, args.name or "", training)
     print(
         f"{args.out}: {report['episodes']}/{report['tried']} episodes recorded "
         f"({report['frames']} frames at {report['fps']:g} Hz, {spec.control_mode}, cameras "
@@ -893,8 +897,11 @@ EVALUATE_DOC = """Evaluate a policy on seeded generated problems: success rate w
 Wilson interval, per problem size, mean steps and time, and why episodes ended.
 
 POLICY is module:attribute of a policy factory (the policy slot's protocol:
-reset(task, seed), act(observation)). --suite is a scenario giving the problems, action
-space and cameras (as record reads it); --blocks LO HI draws each problem's size.
+reset(task, seed), act(observation)), or a folder written by python -m cake_drake.train
+(any LeRobot checkpoint folder), run on --device. --suite is a scenario giving the
+problems, action space and cameras (as record reads it); --blocks LO HI draws each
+problem's size; --seed sets the first episode's seed (default: the scenario's), so
+held-out seeds can be chosen.
 
 Writes to --out (default outputs/evaluate/): results.parquet and results.csv (one row
 per episode), summary.json and success.png. Exit codes: 0 done; 2 bad input; 3 the policy failed;
@@ -908,10 +915,12 @@ def evaluate_parser() -> argparse.ArgumentParser:
         description=EVALUATE_DOC,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("policy", help="module:attribute of the policy's factory")
+    p.add_argument("policy", help="module:attribute of the policy's factory, or a checkpoint")
     p.add_argument("--suite", type=Path, required=True, help="a scenario file")
     p.add_argument("--name", help="the scenario's name in the suite file")
     p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--seed", type=int, help="the first episode's seed (default: the suite's)")
+    p.add_argument("--device", default="auto", help="a checkpoint's device: auto | cpu | cuda")
     p.add_argument("--blocks", type=int, nargs=2, metavar=("LO", "HI"), help="problem sizes")
     p.add_argument("--workers", type=int, help="worker processes (default: cores)")
     _ray_flag(p)
@@ -925,6 +934,8 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     from cake_drake.learning.evaluation import evaluate
     from cake_drake.learning.recording import spec_from_scenario
     from cake_drake.outputs.files import OutputDir
+    from cake_drake.pipeline import CHECKPOINT_POLICY
+    from cake_drake.plugins import is_plugin
     from cake_drake.scenario import load_scenario
 
     args = evaluate_parser().parse_args(argv)
@@ -932,7 +943,19 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     if not 1 <= args.episodes <= 100_000:
         raise InputError(f"--episodes {args.episodes}: from 1 to 100000")
     scenario = load_scenario(args.suite, args.name)
+    checkpoint = Path(args.policy).is_dir() or not is_plugin(args.policy)
     spec = replace(spec_from_scenario(scenario, args.policy), cameras=())
+    if checkpoint:  # a trained policy: the learned layer's adapter runs it
+        from cake_drake.learning.checkpoint import check_folder
+
+        check_folder(Path(args.policy), spec.control_mode, args.device)
+        options = {**spec.options, "path": str(Path(args.policy).resolve()), "device": args.device}
+        spec = replace(spec, policy=CHECKPOINT_POLICY, options=options)
+        if "images" in _checkpoint_inputs(Path(args.policy)):
+            spec = replace(spec, cameras=spec_from_scenario(scenario).cameras)
+    first = scenario.seed if args.seed is None else args.seed
+    if not -(2**31) <= first <= 2**31 - 1:
+        raise InputError(f"--seed {first}: from -2147483648 to 2147483647")
     if args.blocks:
         lo, hi = args.blocks
         if not 1 <= lo <= hi <= 12:
@@ -942,8 +965,9 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     with OutputDir(args.out, "evaluate", names, [args.suite]) as out:
         from cake_drake.plugins import resolve
 
-        resolve(args.policy, {}, "policy")  # refused before any episode
-        seeds = [scenario.seed + k for k in range(args.episodes)]
+        if not checkpoint:
+            resolve(args.policy, {}, "policy")  # refused before any episode
+        seeds = [first + k for k in range(args.episodes)]
         rows, summary = evaluate(spec, seeds, workers, _ray(args.ray, workers))
         from cake_drake.sweeps.table import write_table
 
@@ -958,6 +982,75 @@ def main_evaluate(argv: list[str] | None = None) -> int:
         f"{args.policy}: {summary['success']}/{summary['episodes']} episodes reached the goal "
         f"({summary['rate']:.0%}, 95 % interval {lo:.0%} to {hi:.0%}); mean "
         f"{summary['mean_steps']:.0f} steps; outputs in {args.out}/"
+    )
+    return EXIT_OK
+
+
+def _checkpoint_inputs(path: Path) -> str:
+    """What a checkpoint reads: its config's input features, as text."""
+    from cake_drake.learning.checkpoint import model_folder
+
+    return (model_folder(path) / "config.json").read_text()
+
+
+TRAIN_DOC = """Train a policy on a recording with LeRobot's own training loop, offline.
+
+DATASET is a folder written by python -m cake_drake.record. With no other flag the
+recipe of the recording's task is used (models/scenarios/learning.yaml: policy, inputs,
+steps, batch size, network size); flags override it. --inputs state reads the joints and
+observation.environment_state (the cubes' poses and the goal: trains on a CPU in
+minutes), images the cameras (GPU work), both all of them. Nothing is downloaded: the
+dataset is read from its folder and backbones start from scratch unless --weights names
+a file. The checkpoint is LeRobot's (OUT/checkpoints/last/pretrained_model): evaluate it
+with python -m cake_drake.evaluate OUT, or run it with reference: !Policy {checkpoint: OUT}.
+--resume continues OUT's training up to --steps.
+
+Exit codes: 0 trained; 2 bad input (a dataset lacking what the policy needs, a device
+that is not here); 4 the checkpoint could not be written; 130 interrupted.
+"""
+
+
+def train_parser() -> argparse.ArgumentParser:
+    p = CliParser(
+        prog="python -m cake_drake.train",
+        description=TRAIN_DOC,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("dataset", type=Path, help="a recording (python -m cake_drake.record)")
+    p.add_argument("--out", type=Path, required=True, help="the training's folder")
+    p.add_argument("--policy", help="act | diffusion (default: the recipe's)")
+    p.add_argument("--inputs", help="state | images | both (default: the recipe's)")
+    p.add_argument("--steps", type=int, help="training steps (default: the recipe's)")
+    p.add_argument("--batch-size", type=int, help="batch size (default: the recipe's)")
+    p.add_argument("--device", default="auto", help="auto | cpu | cuda (default auto)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--weights", help="a vision backbone's weights file (default: from scratch)")
+    p.add_argument("--resume", action="store_true", help="continue OUT's last checkpoint")
+    return p
+
+
+def main_train(argv: list[str] | None = None) -> int:
+    from dataclasses import replace
+
+    from cake_drake.learning.train import recipe_of, train
+
+    args = train_parser().parse_args(argv)
+    recipe, report = recipe_of(args.dataset)
+    given = {
+        "policy": args.policy,
+        "inputs": args.inputs,
+        "steps": args.steps,
+        "batch_size": args.batch_size,
+    }
+    recipe = replace(recipe, **{k: v for k, v in given.items() if v is not None})
+    if args.weights is not None and not Path(args.weights).is_file():
+        raise InputError(f"--weights {args.weights}: no such file")
+    folder = train(
+        args.dataset, args.out, recipe, args.device, args.seed, args.resume, args.weights
+    )
+    print(
+        f"{args.out}: {recipe.policy} ({recipe.inputs}) trained {recipe.steps} steps on "
+        f"{args.dataset}; checkpoint {folder}"
     )
     return EXIT_OK
 
@@ -996,6 +1089,7 @@ COMMANDS: dict[str, tuple[Callable[[list[str] | None], int], str]] = {
     "saycan": (main_saycan, "map a SayCan-style transcript onto the kitchen domain"),
     "record": (main_record, "demonstrations as a LeRobot dataset; replay one"),
     "evaluate": (main_evaluate, "a policy's success rate on seeded problems"),
+    "train": (main_train, "train a policy on a recording with LeRobot's own loop"),
 }
 
 

@@ -232,7 +232,7 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
     from cake_drake.geometric.ik import DlsIk
     from cake_drake.plugins import guarded
     from cake_drake.policy.observations import goal_facts, instruction
-    from cake_drake.systems.policy_source import PolicyTask, make_policy
+    from cake_drake.systems.policy_source import PolicyTask, make_policy, policy_of
 
     ref = scenario.reference
     view = blocksworld_view(problem)
@@ -247,9 +247,13 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
         dict(ref.options),
     )
     kinematics = Kinematics(scene.control_plant)
-    label = f"policy {ref.factory!r}" if ref.factory else "the policy"
+    label = getattr(policy, "label", None) or (
+        f"policy {ref.factory!r}" if ref.factory else "the policy"
+    )
     if policy is None:
-        policy = make_policy(ref.factory, ref.options)
+        factory, options = policy_of(ref)
+        label = f"policy {ref.checkpoint!r}" if ref.checkpoint else label
+        policy = make_policy(factory, options)
         guarded(label, policy.reset, task, scenario.seed)
     source = builder.AddNamedSystem(
         "policy",

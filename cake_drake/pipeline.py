@@ -22,7 +22,7 @@ from cake_drake.diagram import CakeDiagram, build_diagram
 from cake_drake.errors import InputError, NoPlanError
 from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
-from cake_drake.plugins import PluginError, is_plugin, resolve
+from cake_drake.plugins import PluginError, is_plugin, load_attribute, resolve
 from cake_drake.scenario import (
     HELPER_CHOICES,
     Generate,
@@ -54,7 +54,7 @@ from cake_drake.symbolic import (
 from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.cameras import check_cameras
 from cake_drake.world.faults import Move, RandomFault, Slip, check_faults, resolve_random
-from cake_drake.world.scene import layout
+from cake_drake.world.scene import jittered, layout
 
 #: A planner: ``(problem, time_limit) -> Plan`` (or a sequence of ground actions).
 Planner = Callable[[Problem, float | None], "Plan | Sequence[GroundAction]"]
@@ -105,6 +105,8 @@ def _check_numbers(s: Scenario) -> None:
     _range(w.slot_radius, 0.2, 2.0, "world.slot_radius", " m")
     _range(w.slot_spacing, 0.05, 1.0, "world.slot_spacing", " m")
     _range(w.slot_spacing_max, 0.05, 1.0, "world.slot_spacing_max", " m")
+    _range(w.placement.xy, 0.0, 0.03, "world.placement.xy", " m")
+    _range(w.placement.yaw_deg, 0.0, 45.0, "world.placement.yaw_deg", " degrees")
     _range(w.sap_near_rigid_threshold, 0.0, 1.0, "world.sap_near_rigid_threshold")
     _range(w.finger_kp, 1e-3, 1e6, "world.finger_kp", " N/m")
     _range(w.finger_kd, 0.0, 1e5, "world.finger_kd", " N s/m")
@@ -272,22 +274,38 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     return Checked(s, problem, planner, out, generated)
 
 
+#: The adapter that runs a LeRobot checkpoint in the slot, and its folder check.
+CHECKPOINT_POLICY = "cake_drake.learning.checkpoint:make"
+CHECKPOINT_CHECK = "cake_drake.learning.checkpoint:check_folder"
+
+
 def check_policy(ref: Policy) -> None:
     """A ``!Policy`` reference that can run: a factory that imports, a known action space,
     a rate and a step budget in range (the policy itself is built with the Diagram)."""
     from cake_drake.policy.spaces import check_space
 
-    if not ref.factory:
+    if ref.checkpoint:
+        if ref.factory:
+            raise InputError(
+                f"reference: !Policy has a factory ({ref.factory}) and a checkpoint "
+                f"({ref.checkpoint}): a policy is one or the other; drop one"
+            )
+        # The learned layer's adapter, through the plug-in door (nothing here imports it).
+        load_attribute(CHECKPOINT_POLICY, "policy")
+        check_folder = load_attribute(CHECKPOINT_CHECK, "policy")
+        check_folder(resolve_path(ref.checkpoint), ref.action_space, ref.device)
+    elif not ref.factory:
         raise InputError(
             "reference: !Policy needs a factory (module:attribute, "
-            "e.g. examples.expert_policy:make)"
+            "e.g. examples.expert_policy:make) or a checkpoint (a folder from cake_drake.train)"
         )
-    if not is_plugin(ref.factory):
+    elif not is_plugin(ref.factory):
         raise InputError(
             f"reference.factory {ref.factory!r}: a policy is module:attribute of your own "
             "(e.g. examples.expert_policy:make)"
         )
-    resolve(ref.factory, {}, "policy")
+    else:
+        resolve(ref.factory, {}, "policy")
     check_space(ref.action_space, ref.options)
     _range(ref.rate_hz, 0.5, 100.0, "reference.rate_hz", " Hz")
     _range(ref.max_steps, 1, 1_000_000, "reference.max_steps")
@@ -398,7 +416,10 @@ def plan_and_layout(checked: Checked) -> tuple[Plan, tuple, dict]:
     scenario = checked.scenario
     needed = check_table_room(checked.problem, plan.actions, len(scenario.world.slots))
     slots = scenario.world.slots_for(needed)
-    initial = layout(towers(blocksworld_view(checked.problem).init), slots)
+    stacks = towers(blocksworld_view(checked.problem).init)
+    initial = layout(stacks, slots)
+    world = scenario.world
+    initial = jittered(initial, stacks, world.placement, scenario.seed, world.slot_spacing)
     return plan, slots, initial
 
 

@@ -134,6 +134,31 @@ class Policy:
     rate_hz: float = 10.0
     max_steps: int = 1000
     options: dict[str, float] = field(default_factory=dict)
+    #: A trained policy instead of a factory: a folder written by ``python -m
+    #: cake_drake.train`` (or any LeRobot checkpoint folder), run through its processors.
+    checkpoint: str = ""
+    device: str = "auto"  # where a checkpoint runs: auto | cpu | cuda
+
+
+@dataclass
+class Training:
+    """A learning task's recipe for ``python -m cake_drake.train``: LeRobot's policy, what it
+    reads, how long it trains and how big its network is (data, not code)."""
+
+    policy: str = "act"  # act | diffusion
+    inputs: str = "state"  # state | images | both
+    steps: int = 20000
+    batch_size: int = 64
+    lr: float = 1e-4
+    #: The transformer's width and depth (ACT), or the U-Net's widths (Diffusion Policy).
+    dim_model: int = 128
+    n_heads: int = 4
+    dim_feedforward: int = 512
+    n_encoder_layers: int = 2
+    down_dims: list[int] = field(default_factory=lambda: [64, 128, 256])
+    #: Actions predicted at once, and how many of them are executed before asking again.
+    chunk_size: int = 20
+    n_action_steps: int = 10
 
 
 ReferenceConfig = Planned | Recorded | Policy
@@ -188,6 +213,8 @@ class Scenario:
     faults: list[FaultConfig] = field(default_factory=list)
     #: Cameras in the world (cake_drake.world.cameras); none by default (no renderer then).
     cameras: list[Camera] = field(default_factory=list)
+    #: How a policy learns this task (python -m cake_drake.train): the learning tasks' recipe.
+    training: Training = field(default_factory=Training)
     seed: int = 0  # IK restarts draw from it; the same seed gives the same run
 
 
@@ -542,6 +569,7 @@ __all__ = [
     "Scenario",
     "Simulation",
     "Task",
+    "Training",
     "Visualization",
     "dump_scenario",
     "load_scenario",

@@ -39,7 +39,7 @@ class ExpertPolicy:
         scenario = copy.deepcopy(task.scenario)
         scenario.reference = Planned()
         scenario.cameras = []
-        scenario.seed = seed
+        # The world the environment built (its seed places the cubes): plan in that one.
         timing = scenario.motion.timing
         timing.velocity_fraction *= self.slow
         timing.acceleration_fraction *= self.slow

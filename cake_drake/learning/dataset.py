@@ -2,6 +2,8 @@
 
 A dataset holds, per frame (one control period, ``fps`` = the policy rate):
 ``observation.state`` (float32, 8: the seven joints in rad and the gripper's width in m),
+``observation.environment_state`` (float32, 240: every cube's pose and the goal as numbers,
+the layout of :mod:`cake_drake.policy.observations`),
 ``observation.images.<camera>`` (video, H x W x 3, H.264 through PyAV's own FFmpeg),
 ``action`` (float32, the control mode's: 8 for ``joint_position``, 7 for ``ee_delta``),
 and lerobot's own ``timestamp``, ``frame_index``, ``episode_index``, ``index`` and
@@ -26,11 +28,19 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
+from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, GOAL_COLUMNS, MAX_CUBES
 
 LEROBOT_PIP = "pip install 'cake_drake[lerobot]'  (lerobot 0.4, with torch: about 8 GB)"
 #: The dataset's name inside its root (lerobot wants an owner/name).
 REPO_ID = "cake_drake/stack"
 STATE_NAMES = [f"joint_{i}" for i in range(1, 8)] + ["gripper_width"]
+ENVIRONMENT_NAMES = [
+    f"cube_{k}_{axis}" for k in range(MAX_CUBES) for axis in ("x", "y", "z", "qw", "qx", "qy", "qz")
+] + [
+    f"cube_{k}_on_{'table' if j == MAX_CUBES else f'cube_{j}'}"
+    for k in range(MAX_CUBES)
+    for j in range(GOAL_COLUMNS)
+]
 ACTION_NAMES = {
     "joint_position": STATE_NAMES,
     "ee_delta": ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"],
@@ -58,6 +68,11 @@ def features(control_mode: str, cameras) -> dict:
         )
     table = {
         "observation.state": {"dtype": "float32", "shape": (8,), "names": STATE_NAMES},
+        "observation.environment_state": {
+            "dtype": "float32",
+            "shape": (ENVIRONMENT_STATE_SIZE,),
+            "names": ENVIRONMENT_NAMES,
+        },
         "action": {
             "dtype": "float32",
             "shape": (len(ACTION_NAMES[control_mode]),),
@@ -121,6 +136,7 @@ def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  
         for k in range(len(ep.actions)):
             frame = {
                 "observation.state": ep.states[k],
+                "observation.environment_state": ep.environment[k],
                 "action": ep.actions[k],
                 "task": ep.task,
             }
@@ -133,11 +149,60 @@ def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  
     return frames
 
 
+def missing_files(root: Path) -> list[str]:
+    """The files a LeRobot dataset at ``root`` names that are not there (relative paths):
+    ``meta/info.json``, the episode tables, and every data and video file they point to.
+    lerobot would fetch a missing one from the hub; a dataset here is read from its
+    folder alone."""
+    import pyarrow.parquet as pq
+
+    root = Path(root)
+    info_path = root / "meta" / "info.json"
+    if not info_path.is_file():
+        return ["meta/info.json"]
+    import json
+
+    try:
+        info = json.loads(info_path.read_text())
+        data_path, video_path = info["data_path"], info.get("video_path")
+        videos = [k for k, f in info["features"].items() if f.get("dtype") == "video"]
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return ["meta/info.json (unreadable)"]
+    tables = sorted((root / "meta" / "episodes").glob("chunk-*/file-*.parquet"))
+    if not tables:
+        return ["meta/episodes/chunk-000/file-000.parquet"]
+    missing: list[str] = []
+    for table in tables:
+        try:
+            rows = pq.read_table(table).to_pylist()
+        except Exception:  # noqa: BLE001 - any unreadable table is named, whatever pyarrow says
+            return [f"{table.relative_to(root)} (unreadable)"]
+        for row in rows:
+            wanted = [data_path.format(chunk_index=row["data/chunk_index"],
+                                       file_index=row["data/file_index"])]  # fmt: skip
+            for key in videos:
+                wanted.append(
+                    video_path.format(
+                        video_key=key,
+                        chunk_index=row[f"videos/{key}/chunk_index"],
+                        file_index=row[f"videos/{key}/file_index"],
+                    )
+                )
+            missing += [w for w in wanted if not (root / w).is_file() and w not in missing]
+    return missing
+
+
 def read(root: Path):
-    """The dataset at ``root``, as lerobot reads it (decoding videos with PyAV)."""
+    """The dataset at ``root``, as lerobot reads it (decoding videos with PyAV), from its
+    folder alone: a file it lacks is named (exit 2), never fetched."""
     require_lerobot()
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
+    gone = missing_files(root)
+    if gone:
+        more = f" (and {len(gone) - 1} more)" if len(gone) > 1 else ""
+        raise InputError(f"{Path(root) / gone[0]}: missing from the dataset{more}; "
+                         "a LeRobot dataset is read from its own folder")  # fmt: skip
     with _quiet():
         return LeRobotDataset(REPO_ID, root=root, video_backend="pyav")
 

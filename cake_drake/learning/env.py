@@ -11,7 +11,13 @@ simulated seconds) and returns what the policy slot observes.
   of the chunk (``execute`` control periods).
 - ``obs_mode``: ``state`` (``state``: joints, gripper width, joint velocities and the grasp
   frame's pose, 22 numbers; ``cubes``: 12 rows of cube poses, zero past the problem's
-  cubes), ``rgb`` (``images``: one RGB image per camera) or ``state+rgb``.
+  cubes; ``environment_state``: the cubes' poses and the goal as numbers, 240, the layout
+  of :mod:`cake_drake.policy.observations`), ``rgb`` (``images``: one RGB image per
+  camera) or ``state+rgb``.
+- ``placement``: ``(xy, yaw_deg)``, each tower's place jittered by up to ``xy`` m and each
+  cube turned by up to ``yaw_deg`` per seed (the scenario's ``world.placement``).
+- every argument is checked when the environment is made, by the same ``check`` a
+  scenario gets, with the same field names.
 - a generated problem whose goal already holds is drawn again (the same seed always
   gives the same problem).
 - reward: the fraction of the goal's facts measured true in the world; ``info`` has
@@ -19,6 +25,8 @@ simulated seconds) and returns what the policy slot observes.
   the English instruction ``task`` and the ``goal`` facts.
 - ``terminated`` on success, or when a cube has left the table (the world cannot be
   recovered); ``truncated`` after ``max_steps`` steps.
+- the observation is the policy slot's own, computed once per control period: each
+  camera renders once a step.
 
 Drake's own ``pydrake.gym.DrakeGymEnv`` wraps one fixed Diagram; here each reset may bring
 a different number of cubes, so a new Diagram is built per reset.
@@ -29,6 +37,8 @@ a different number of cubes, so a new Diagram is built per reset.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+
 import gymnasium
 import numpy as np
 from gymnasium import spaces as gs
@@ -37,10 +47,10 @@ from pydrake.systems.analysis import Simulator
 from cake_drake.errors import InputError
 from cake_drake.execution import STACK_TOL
 from cake_drake.policy import spaces
+from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, MAX_CUBES
 from cake_drake.world.cameras import Camera, default_cameras
 
 OBS_MODES = ("state", "rgb", "state+rgb")
-MAX_CUBES = 12
 STATE_SIZE = 22
 
 
@@ -48,12 +58,56 @@ class HeldAction:
     """The policy the Diagram asks: it answers with the action the environment was given."""
 
     action = None
+    label = "the action given to CakeDrake/Stack-v0's step()"
 
     def reset(self, task, seed) -> None:
         pass
 
     def act(self, observation):
         return self.action
+
+
+def _blocks(blocks) -> tuple[int, int]:
+    """``blocks`` as (fewest, most): a whole number or a pair of them, 1 to 12."""
+    pair = (blocks, blocks) if not isinstance(blocks, Sequence | np.ndarray) else tuple(blocks)
+    whole = (
+        all(isinstance(b, int | np.integer) and not isinstance(b, bool) for b in pair)
+        and len(pair) == 2
+    )
+    if not whole or not 1 <= pair[0] <= pair[1] <= MAX_CUBES:
+        raise InputError(
+            f"blocks = {blocks!r:.40}: a number of cubes, or a range (fewest, most), "
+            f"whole numbers from 1 to {MAX_CUBES}"
+        )
+    return int(pair[0]), int(pair[1])
+
+
+def _cameras(cameras) -> list[Camera]:
+    """Cameras as :class:`Camera`; a mapping of a camera's fields is read as one."""
+    from dataclasses import fields
+
+    if cameras is None:
+        return default_cameras()
+    if not isinstance(cameras, Sequence) or isinstance(cameras, str):
+        raise InputError(f"cameras = {cameras!r:.40}: a list of cameras")
+    known = {f.name for f in fields(Camera)}
+    out = []
+    for k, c in enumerate(cameras):
+        if isinstance(c, Camera):
+            out.append(c)
+        elif isinstance(c, Mapping):
+            unknown = sorted(set(c) - known)
+            if unknown:
+                raise InputError(
+                    f"cameras[{k}]: unknown field {unknown[0]!r}; valid: {', '.join(sorted(known))}"
+                )
+            out.append(Camera(**c))
+        else:
+            raise InputError(
+                f"cameras[{k}] = {c!r:.40}: a Camera, or a mapping of its fields "
+                f"({', '.join(sorted(known))})"
+            )
+    return out
 
 
 class StackEnv(gymnasium.Env):
@@ -73,23 +127,27 @@ class StackEnv(gymnasium.Env):
         time_step: float = 0.01,
         options: dict | None = None,
         render_mode: str | None = None,
+        placement: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         from cake_drake.geometric.ik import Kinematics
+        from cake_drake.pipeline import check
 
         if obs_mode not in OBS_MODES:
             raise InputError(f"obs_mode {obs_mode!r}; choose one of: {', '.join(OBS_MODES)}")
+        if render_mode not in (None, "rgb_array"):
+            raise InputError(f"render_mode {render_mode!r}; choose rgb_array or None")
+        if not isinstance(options or {}, Mapping):
+            raise InputError(f"options = {options!r:.40}: a mapping of the action space's options")
         self.options = dict(options or {})
-        spaces.check_space(control_mode, self.options)
-        lo, hi = (blocks, blocks) if isinstance(blocks, int) else blocks
-        if not 1 <= lo <= hi <= MAX_CUBES:
-            raise InputError(f"blocks {blocks!r}: from 1 to {MAX_CUBES} cubes")
-        self.blocks, self.problem = (lo, hi), problem
+        self.blocks, self.problem = _blocks(blocks), problem
         self.obs_mode, self.control_mode = obs_mode, control_mode
-        self.cameras = (
-            (default_cameras() if cameras is None else cameras) if "rgb" in obs_mode else []
-        )
+        self.cameras = _cameras(cameras) if "rgb" in obs_mode else []
         self.rate_hz, self.max_steps, self.time_step = rate_hz, max_steps, time_step
+        self.placement = placement
         self.render_mode = render_mode
+        # The same check a scenario gets, before make() returns: field names as a scenario's.
+        self._checked_template = check(self._scenario(0, self.blocks[0]), write=False)
+        self._periods = spaces.periods(control_mode, self.options)
         kin = Kinematics()
         low, high = spaces.bounds(control_mode, self.options, kin.lower, kin.upper)
         self.action_space = gs.Box(
@@ -99,6 +157,9 @@ class StackEnv(gymnasium.Env):
         if "state" in obs_mode:
             parts["state"] = gs.Box(-np.inf, np.inf, (STATE_SIZE,), np.float32)
             parts["cubes"] = gs.Box(-np.inf, np.inf, (MAX_CUBES, 7), np.float32)
+            parts["environment_state"] = gs.Box(
+                -np.inf, np.inf, (ENVIRONMENT_STATE_SIZE,), np.float32
+            )
         if "rgb" in obs_mode:
             parts["images"] = gs.Dict(
                 {c.name: gs.Box(0, 255, (c.height, c.width, 3), np.uint8) for c in self.cameras}
@@ -108,13 +169,15 @@ class StackEnv(gymnasium.Env):
 
     # --- the episode --------------------------------------------------------------------
 
-    def _scenario(self, seed: int):
+    def _scenario(self, seed: int, blocks: int | None = None):
         from cake_drake.scenario import Generate, Policy, Scenario
+        from cake_drake.world.scene import Placement
 
         s = Scenario()
         if self.problem is None:
-            n = int(self.np_random.integers(self.blocks[0], self.blocks[1] + 1))
-            s.task.generate = Generate(blocks=n, seed=seed)
+            if blocks is None:
+                blocks = int(self.np_random.integers(self.blocks[0], self.blocks[1] + 1))
+            s.task.generate = Generate(blocks=blocks, seed=seed)
         else:
             s.task.problem = self.problem
         s.reference = Policy(
@@ -125,6 +188,13 @@ class StackEnv(gymnasium.Env):
             options=self.options,
         )
         s.world.time_step = self.time_step
+        try:
+            xy, yaw_deg = self.placement
+        except (TypeError, ValueError):
+            raise InputError(
+                f"placement = {self.placement!r:.40}: (xy in m, yaw in degrees)"
+            ) from None
+        s.world.placement = Placement(xy=xy, yaw_deg=yaw_deg)
         s.cameras = list(self.cameras)
         s.outputs.render = False
         s.seed = seed
@@ -149,23 +219,23 @@ class StackEnv(gymnasium.Env):
         self._cake = build_diagram(
             scenario, checked.problem, initial, plan.actions, slots=slots, policy=self._held
         )
-        self._view = blocksworld_view(checked.problem)
+        self._view = view
+        self._goal_on = [f for f in view.goal if f[0] == "on"]
         self._source = self._cake.reference.policy
         #: What a policy is told at its reset (a policy that plans reads the problem here).
         self.policy_task = self._source.task
         self._simulator = Simulator(self._cake.diagram)
         self._simulator.Initialize()
+        self._context = self._simulator.get_context()
+        self._source_context = self._source.GetMyContextFromRoot(self._context)
         self._steps = 0
         return self._observe()
 
     def step(self, action):
         if self._simulator is None:
             raise RuntimeError("call reset() before step()")
-        self._held.action = np.asarray(action, dtype=float)
-        context = self._simulator.get_context()
-        periods = int(self.options.get("execute", self.options.get("horizon", 10)))
-        periods = periods if self.control_mode == "joint_chunk" else 1
-        self._simulator.AdvanceTo(context.get_time() + periods / self.rate_hz)
+        self._held.action = action
+        self._simulator.AdvanceTo(self._context.get_time() + self._periods / self.rate_hz)
         self._steps += 1
         obs, info = self._observe()
         terminated = info["is_success"] or info["unrecoverable"]
@@ -176,44 +246,43 @@ class StackEnv(gymnasium.Env):
         if self.render_mode != "rgb_array" or self._simulator is None:
             return None
         from cake_drake.world.render import Renderer
-
-        poses, q, fingers = self._measured()
-        if not hasattr(self, "_renderer"):
-            self._renderer = Renderer(list(self._view.blocks), 640, 480)
-        return self._renderer.render(poses, q, fingers)[:, :, :3]
-
-    # --- what the agent sees ------------------------------------------------------------
-
-    def _measured(self):
-        scene = self._cake.scene
-        plant_context = scene.plant.GetMyContextFromRoot(self._simulator.get_context())
         from cake_drake.world.scene import cube_poses
 
+        scene = self._cake.scene
+        plant_context = scene.plant.GetMyContextFromRoot(self._context)
         q = scene.plant.GetPositions(plant_context, scene.arm)
         fingers = float(scene.plant.GetPositions(plant_context, scene.hand)[0])
-        return cube_poses(scene, plant_context), q, fingers
+        if not hasattr(self, "_renderer"):
+            self._renderer = Renderer(list(self._view.blocks), 640, 480)
+        return self._renderer.render(cube_poses(scene, plant_context), q, fingers)[:, :, :3]
+
+    # --- what the agent sees ------------------------------------------------------------
 
     def _observe(self):
         from cake_drake.world.facts import read_facts, stack_offsets
 
-        context = self._source.GetMyContextFromRoot(self._simulator.get_context())
-        o = self._source.observe(context)
+        # The slot's own observation of this period: the policy's update at this time
+        # reads the same object, so each camera renders once a step.
+        o = self._source.observe(self._source_context)
         obs = {}
         if "state" in self.obs_mode:
-            obs["state"] = np.r_[
-                o["observation.state"], o["observation.velocity"], o["observation.ee_pose"]
-            ].astype(np.float32)
+            obs["state"] = np.concatenate(
+                [o["observation.state"], o["observation.velocity"], o["observation.ee_pose"]]
+            )
             cubes = np.zeros((MAX_CUBES, 7), np.float32)
             cubes[: len(o["cubes"])] = o["observation.cubes"]
             obs["cubes"] = cubes
+            obs["environment_state"] = o["observation.environment_state"]
         if "rgb" in self.obs_mode:
             obs["images"] = {c.name: o[f"observation.images.{c.name}"] for c in self.cameras}
-        poses, _, fingers = self._measured()
-        reading = read_facts(poses, finger_opening=fingers)
+        poses = o.cube_poses
+        reading = read_facts(poses, finger_opening=o.finger)
         goal = self._view.goal
         true = goal & reading.facts
-        offsets = stack_offsets(poses, reading.facts)
-        loose = any(offsets.get(f[1], 0.0) > STACK_TOL for f in goal if f[0] == "on" and f in true)
+        loose = False
+        if any(f in true for f in self._goal_on):
+            offsets = stack_offsets(poses, reading.facts)
+            loose = any(offsets.get(f[1], 0.0) > STACK_TOL for f in self._goal_on if f in true)
         info = {
             "reward": len(true) / len(goal) if goal else 1.0,
             "is_success": bool(true == goal and not loose),

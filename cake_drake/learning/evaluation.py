@@ -13,7 +13,7 @@ from dataclasses import asdict
 import numpy as np
 
 from cake_drake.learning.parallel import map_ordered
-from cake_drake.learning.rollout import EpisodeSpec, rollout
+from cake_drake.learning.rollout import FRAMES, EpisodeSpec, rollout
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -30,7 +30,7 @@ def _evaluate_one(args) -> dict:
     """One episode's row, no frames (run in a worker)."""
     spec, seed = args
     ep = rollout(spec, seed, record=False)
-    return {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
+    return {k: v for k, v in asdict(ep).items() if k not in FRAMES}
 
 
 def evaluate(

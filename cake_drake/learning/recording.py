@@ -23,7 +23,7 @@ import numpy as np
 
 from cake_drake.errors import InputError, OutputError
 from cake_drake.learning.parallel import imap, map_ordered
-from cake_drake.learning.rollout import EXPERT, Episode, EpisodeSpec, replay, rollout
+from cake_drake.learning.rollout import EXPERT, FRAMES, Episode, EpisodeSpec, replay, rollout
 
 RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 
@@ -42,8 +42,12 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
     elif s.task.problem:
         problem = str(resolve_path(s.task.problem))
     ref = s.reference
+    placement = (s.world.placement.xy, s.world.placement.yaw_deg)
     spec = EpisodeSpec(
-        blocks=blocks, problem=problem, cameras=tuple(s.cameras or default_cameras())
+        blocks=blocks,
+        problem=problem,
+        cameras=tuple(s.cameras or default_cameras()),
+        placement=placement,
     )
     if isinstance(ref, Policy):
         spec = replace(
@@ -55,7 +59,7 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
             options={k: v for k, v in (ref.options or {}).items()},
         )
     if policy:
-        spec = replace(spec, policy=policy, options={})
+        spec = replace(spec, policy=policy, options=spec.action_options())
     return spec
 
 
@@ -71,25 +75,76 @@ def _record_one(args) -> Episode:
 def _keep(ep: Episode, folder: Path) -> dict:
     """Write a finished episode into the recording's ``episodes/`` (its frames when it
     succeeded, whole by rename; its verdict always, last); its row."""
-    row = {k: v for k, v in asdict(ep).items() if k not in ("states", "actions", "images")}
+    row = {k: v for k, v in asdict(ep).items() if k not in FRAMES}
     if ep.success and ep.actions is not None:
         tmp = folder / f".ep_{ep.seed}.npz"
         with open(tmp, "wb") as f:
-            np.savez(f, states=ep.states, actions=ep.actions, task=ep.task,
-                     **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
+            np.savez(f, states=ep.states, actions=ep.actions, environment=ep.environment,
+                     task=ep.task, **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
         os.replace(tmp, folder / f"ep_{ep.seed}.npz")
-    (folder / f"ep_{ep.seed}.json").write_text(json.dumps(row) + "\n")
+    _write_whole(folder / f"ep_{ep.seed}.json", json.dumps(row) + "\n")
     return row
+
+
+def _write_whole(path: Path, text: str) -> None:
+    """Write ``path`` whole or not at all (a temporary file, then a rename)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _finished(cache: Path) -> dict[int, dict]:
+    """The episodes of an interrupted recording that finished: seed -> row. A verdict that
+    cannot be read (cut short by a crash) counts as not finished: it runs again."""
+    rows = {}
+    for path in cache.glob("ep_*.json"):
+        try:
+            row = json.loads(path.read_text())
+            rows[int(row["seed"])] = row
+        except (ValueError, KeyError, TypeError, OSError):
+            continue
+    return rows
+
+
+#: What a resumed recording must share with the one it continues.
+SAME_FOR_RESUME = ("control_mode", "rate_hz", "cameras", "problem", "blocks", "placement")
+
+
+def _check_resume(cache: Path, spec: EpisodeSpec, out: Path) -> None:
+    """Refuse to continue a recording made with another action space, rate, cameras or
+    task: one line naming what differs."""
+    path = cache / "spec.json"
+    if not path.is_file():
+        return
+    try:
+        before = json.loads(path.read_text())
+    except ValueError:
+        return
+    now = json.loads(json.dumps(_spec_json(spec)))
+    for key in SAME_FOR_RESUME:
+        if key in before and before[key] != now[key]:
+            raise InputError(
+                f"{out}: --resume with another {key}: the recording has {before[key]!r:.60}, "
+                f"this scenario {now[key]!r:.60}; record into another --out"
+            )
 
 
 # --- record -------------------------------------------------------------------------------
 
 
 def record(
-    spec: EpisodeSpec, out: Path, seeds: list[int], workers: int, resume: bool, ray=None
+    spec: EpisodeSpec,
+    out: Path,
+    seeds: list[int],
+    workers: int,
+    resume: bool,
+    ray=None,
+    task: str = "",
+    training: dict | None = None,
 ) -> dict:
     """Record ``seeds``' episodes into the dataset at ``out`` (see the module), on a local
-    pool of ``workers`` or on ``ray``; each is kept by this process as it finishes."""
+    pool of ``workers`` or on ``ray``; each is kept by this process as it finishes. The
+    report names the ``task`` and keeps its ``training`` recipe, for ``train``."""
     from cake_drake.learning import dataset
     from cake_drake.outputs.files import check_output_folder, claim_folder
 
@@ -101,13 +156,17 @@ def record(
         raise InputError(
             f"{out}: holds a recording already; --resume continues it, or choose another --out"
         )
+    if resume and cache.is_dir():
+        _check_resume(cache, spec, out)
     claim_folder(out, "record", RECORD_OUTPUTS)
     cache.mkdir(exist_ok=True)
-    done = {int(p.stem[3:]) for p in cache.glob("ep_*.json")} if resume else set()
+    _write_whole(cache / "spec.json", json.dumps(_spec_json(spec)) + "\n")
+    done = _finished(cache) if resume else {}
     todo = [s for s in seeds if s not in done]
     for ep in imap(_record_one, [(spec, s) for s in todo], workers, ray):
-        _keep(ep, cache)
-    rows = [json.loads((cache / f"ep_{s}.json").read_text()) for s in seeds]
+        row = _keep(ep, cache)
+        done[ep.seed] = row
+    rows = [done[s] for s in seeds]
     kept = [r for r in rows if r["success"] and (cache / f"ep_{r['seed']}.npz").is_file()]
     staging = real / f".staging-{os.getpid()}"
     shutil.rmtree(staging, ignore_errors=True)
@@ -134,6 +193,8 @@ def record(
                 if not r["success"]
             ],
             "spec": _spec_json(spec),
+            "task": task,
+            "training": training or {},
         }
         (staging / "dataset" / "report.json").write_text(json.dumps(report, indent=2) + "\n")
         _install(real, staging / "dataset", ("meta", "data", "videos", "report.json"))
@@ -149,7 +210,7 @@ def _load(path: Path, row: dict) -> Episode:
         images = {k[6:]: z[k] for k in z.files if k.startswith("image_")}
         return Episode(
             row["seed"], True, row["reason"], row["steps"], row["wall_s"], str(z["task"]),
-            row["blocks"], z["states"], z["actions"], images,
+            row["blocks"], z["states"], z["environment"], z["actions"], images,
         )  # fmt: skip
 
 
@@ -172,6 +233,7 @@ def _spec_json(spec: EpisodeSpec) -> dict:
     d = asdict(spec)
     d["cameras"] = [asdict(c) for c in spec.cameras]
     d["blocks"] = list(spec.blocks) if isinstance(spec.blocks, tuple) else spec.blocks
+    d["placement"] = list(spec.placement)
     return d
 
 
@@ -186,6 +248,7 @@ def _spec_from_json(d: dict) -> EpisodeSpec:
         cameras=(),  # the replay judges from poses: no images needed
         policy=d["policy"],
         options=d["options"],
+        placement=tuple(d.get("placement", (0.0, 0.0))),
     )
 
 

@@ -6,8 +6,9 @@ loop (:func:`replay`). Recording (``python -m cake_drake.record``) and evaluatio
 (``python -m cake_drake.evaluate``) are loops over these, on a process pool.
 
 The episode's frames are what the policy saw and did: at each step the observation
-(``observation.state``: the seven joints and the gripper's width; one image per camera)
-and the action it answered, in the environment's control mode, then held for one
+(``observation.state``: the seven joints and the gripper's width;
+``observation.environment_state``: the cubes' poses and the goal as numbers; one image per
+camera) and the action it answered, in the environment's control mode, then held for one
 control period. Replaying the actions from the same seed therefore rebuilds the same
 episode, up to the simulation's own determinism (bit for bit on one machine).
 """
@@ -39,6 +40,7 @@ class EpisodeSpec:
     cameras: tuple = ()  # cake_drake.world.cameras.Camera, none: state only
     policy: str = EXPERT
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
+    placement: tuple[float, float] = (0.0, 0.0)  # world.placement: xy (m), yaw (degrees)
 
     def env(self):
         from cake_drake.learning.env import StackEnv
@@ -51,7 +53,17 @@ class EpisodeSpec:
             cameras=list(self.cameras) or None,
             rate_hz=self.rate_hz,
             max_steps=self.max_steps,
+            options=self.action_options(),
+            placement=self.placement,
         )
+
+    def action_options(self) -> dict:
+        """The action space's own options (a chunk's ``horizon`` and ``execute``)."""
+        return {k: v for k, v in self.options.items() if k in ("horizon", "execute")}
+
+
+#: An episode's frame arrays (the rest of an :class:`Episode` is its row in a table).
+FRAMES = ("states", "environment", "actions", "images")
 
 
 @dataclass
@@ -66,6 +78,7 @@ class Episode:
     task: str = ""  # the instruction in English
     blocks: int = 0
     states: np.ndarray | None = None  # (T, 8) float32
+    environment: np.ndarray | None = None  # (T, 240) float32: observation.environment_state
     actions: np.ndarray | None = None  # (T, A) float32
     images: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (T, H, W, 3) uint8
 
@@ -76,26 +89,41 @@ def _make_policy(spec: str, options: dict):
     return make_policy(spec, options)
 
 
+def budget_text(max_steps: int, rate_hz: float, periods: int = 1) -> str:
+    """How a step budget that ran out is named: its steps and its simulated seconds."""
+    return (
+        f"the policy's step budget of {max_steps} ({max_steps * periods / rate_hz:.1f} s) ran out"
+    )
+
+
 def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
     """Run the policy ``spec.policy`` for one episode of ``spec.env()`` reset with ``seed``."""
+    from cake_drake.geometric.ik import Kinematics
+    from cake_drake.policy import spaces
+
     env = spec.env()
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
     policy = _make_policy(spec.policy, spec.options)
     label = f"policy {spec.policy!r}"
     guarded(label, policy.reset, env.unwrapped.policy_task, seed, exit_code=DURING)
-    states, actions, images = [], [], {c.name: [] for c in spec.cameras}
-    reason, steps = "the step budget ended", 0
+    kin = Kinematics()
+    options, counts = spec.action_options(), spaces.Counts()
+    states, environment, actions = [], [], []
+    images = {c.name: [] for c in spec.cameras}
+    reason, steps = "the policy said done", 0
     terminated = truncated = False
     while True:
         answer = guarded(label, policy.act, obs, exit_code=DURING, budget_s=ACT_BUDGET_S)
-        action, done = answer if isinstance(answer, tuple) else (answer, False)
+        action, done = spaces.read_answer(answer, label)
         if done and action is None:
-            reason = "the policy said done"
             break
-        action = np.asarray(action, dtype=np.float32)
+        action = spaces.checked(
+            action, spec.control_mode, options, label, kin.lower, kin.upper, counts
+        ).astype(np.float32)
         if record:
             states.append(np.asarray(obs["state"][:8], np.float32))
+            environment.append(obs["environment_state"])
             actions.append(action)
             for name in images:
                 images[name].append(obs["images"][name])
@@ -108,13 +136,18 @@ def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
     elif terminated:
         reason = "a cube left the table"
     elif truncated:
-        reason = f"not done after {spec.max_steps} steps"
+        reason = budget_text(
+            spec.max_steps, spec.rate_hz, spaces.periods(spec.control_mode, options)
+        )
+    elif getattr(policy, "reason", None):  # a policy that says why it stopped
+        reason = f"the policy said done: {policy.reason}"
     ep = Episode(
         seed, bool(info["is_success"]), reason, steps, time.perf_counter() - t0,
         info["task"], len(info["cubes"]),
     )  # fmt: skip
     if record and actions:
         ep.states, ep.actions = np.stack(states), np.stack(actions)
+        ep.environment = np.stack(environment)
         ep.images = {k: np.stack(v) for k, v in images.items()}
     return ep
 

@@ -46,20 +46,63 @@ class Counts:
     unreachable: int = 0
 
 
-def check_space(name: str, options: dict) -> None:
-    """Refuse an unknown space or bad options before anything runs."""
+#: The most rows a ``joint_chunk`` action may have (100 control periods: 10 s at 10 Hz).
+MAX_HORIZON = 100
+
+
+def _whole(value, name: str, lo: int, hi: int, where: str) -> int:
+    """``value`` as a whole number in ``lo``..``hi``; one line naming ``where`` otherwise."""
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if not (number and float(value).is_integer() and lo <= value <= hi):
+        shown = f"{value:g}" if number else repr(value)
+        shown = shown if len(shown) <= 24 else shown[:20] + "..."
+        raise InputError(
+            f"{where}.{name} = {shown}: a whole number of control periods from {lo} to {hi} "
+            "(1 <= execute <= horizon)"
+        )
+    return int(value)
+
+
+def check_space(name: str, options: dict, where: str = "reference.options") -> None:
+    """Refuse an unknown space or bad options before anything runs: a ``joint_chunk``'s
+    ``horizon`` and ``execute`` are whole numbers, 1 <= execute <= horizon <= MAX_HORIZON."""
     if name not in ACTION_SPACES:
         raise InputError(
             f"reference.action_space {name!r}; choose one of: {', '.join(ACTION_SPACES)}"
         )
     if name == "joint_chunk":
-        horizon = options.get("horizon", 10)
-        execute = options.get("execute", horizon)
-        if not (horizon >= 1 and 1 <= execute <= horizon and float(execute).is_integer()):
-            raise InputError(
-                f"joint_chunk options horizon {horizon:g}, execute {execute:g}: "
-                "1 <= execute <= horizon, whole numbers"
-            )
+        horizon = _whole(options.get("horizon", 10), "horizon", 1, MAX_HORIZON, where)
+        _whole(options.get("execute", horizon), "execute", 1, horizon, where)
+
+
+def periods(name: str, options: dict) -> int:
+    """Control periods one action is held for: a chunk's ``execute`` rows, otherwise 1."""
+    if name != "joint_chunk":
+        return 1
+    return int(options.get("execute", options.get("horizon", 10)))
+
+
+def read_answer(answer, label: str) -> tuple[object, bool]:
+    """A policy's answer to ``act`` as (action, done): an action, ``(action, done)`` or
+    ``(None, True)``; ``done`` a bool. Anything else is one line naming the policy."""
+    if not isinstance(answer, tuple):
+        return answer, False
+    if len(answer) != 2:
+        raise PluginError(
+            f"{label} returned a tuple of {len(answer)}; act() returns an action, or "
+            "(action, done) with done a bool",
+            DURING,
+        )
+    action, done = answer
+    if not isinstance(done, bool | np.bool_):
+        raise PluginError(
+            f"{label} returned done = {done!r:.40} ({type(done).__name__}); done is a bool "
+            "(True: the policy is finished)",
+            DURING,
+        )
+    if action is None and not done:
+        raise PluginError(f"{label} returned (None, False): no action and not done", DURING)
+    return action, bool(done)
 
 
 def shape(name: str, options: dict) -> tuple[int, ...]:
@@ -87,6 +130,8 @@ def checked(action, name: str, options: dict, label: str, lower, upper, counts: 
     one line naming the policy when it is not an array of that shape of finite numbers."""
     want = shape(name, options)
     try:
+        if isinstance(action, dict | str | bytes) or action is None:
+            raise TypeError
         a = np.asarray(action, dtype=float)
     except (TypeError, ValueError):
         raise PluginError(

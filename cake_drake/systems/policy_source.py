@@ -23,6 +23,10 @@ line naming it), turns it into 7 joint targets and a gripper width
 the same named reference ports ``WaypointIk`` has, so the controller, the plant, the
 loggers and the verdict are unchanged. The policy object is Python state outside the
 Context: one Diagram, one policy.
+
+The observation is computed once per control period and kept: whoever reads it at the
+same simulated time (the policy at the update, a Gym environment between steps) gets the
+same object, and each camera renders at most once, on its first read.
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ from pydrake.systems.sensors import ImageRgba8U
 
 from cake_drake.plugins import DURING, PluginError, guarded
 from cake_drake.policy import spaces
-from cake_drake.policy.observations import pose7
+from cake_drake.policy.observations import Observation, environment_state, goal_table, pose7
 from cake_drake.systems.waypoint_ik import REFERENCE_PORTS, WorldIndices
 
 #: Wall-clock budget (s) of one call to a policy's ``act``.
@@ -58,6 +62,13 @@ class PolicyTask:
     action_space: str = "joint_position"  # what the policy is to answer in
     rate_hz: float = 10.0
     options: dict | None = None
+    goal_table: np.ndarray | None = None  # (12, 13): the goal as numbers (observations.py)
+
+    def __post_init__(self) -> None:
+        if self.goal_table is None and self.problem is not None:
+            from cake_drake.symbolic.roles import blocksworld_view
+
+            self.goal_table = goal_table(self.cubes, blocksworld_view(self.problem).goal)
 
 
 class PolicySource(LeafSystem):
@@ -87,6 +98,7 @@ class PolicySource(LeafSystem):
         self.steps = 0
         self.last_action: np.ndarray | None = None
         self._chunk: deque = deque()
+        self._observed: tuple | None = None
         self._q = np.asarray(q_start, float).copy()
         self._width = spaces.GRIPPER_MAX
         self._arm = self.DeclareVectorInputPort("arm_state", 14)
@@ -114,28 +126,44 @@ class PolicySource(LeafSystem):
 
     # --- what the policy sees -------------------------------------------------------
 
-    def observe(self, context) -> dict:
-        """The observation now (see :mod:`cake_drake.policy.observations`)."""
+    def observe(self, context) -> Observation:
+        """The observation now (see :mod:`cake_drake.policy.observations`), computed once
+        per simulated time and step; its images render on their first read."""
+        key = (context.get_time(), self.steps)
+        if self._observed is not None and self._observed[0] == key:
+            return self._observed[1]
         arm = self._arm.Eval(context)
         hand = self._hand.Eval(context)
         poses = self._poses.Eval(context)
         X_WG = poses[self.world.hand_body].multiply(self.world.X_hand_grasp)
         cubes = self.task.cubes
-        obs = {
+        X_cubes = {c: poses[self.world.cube_bodies[c]] for c in cubes}
+        cube7 = np.array([pose7(X_cubes[c]) for c in cubes], np.float32).reshape(len(cubes), 7)
+        goal = self.task.goal_table
+        if goal is None:
+            goal = np.zeros((12, 13), np.float32)
+        values = {
             "observation.state": np.r_[arm[:7], hand[0] + hand[1]].astype(np.float32),
             "observation.velocity": np.asarray(arm[7:], np.float32),
             "observation.ee_pose": pose7(X_WG),
-            "observation.cubes": np.array(
-                [pose7(poses[self.world.cube_bodies[c]]) for c in cubes], np.float32
-            ).reshape(len(cubes), 7),
+            "observation.cubes": cube7,
+            "observation.environment_state": environment_state(cube7, goal),
             "cubes": cubes,
             "task": self.task.instruction,
             "goal": self.task.goal,
             "time": float(context.get_time()),
             "step": self.steps,
         }
-        for name, port in self._images.items():
-            obs[f"observation.images.{name}"] = np.array(port.Eval(context).data[:, :, :3])
+        images = {
+            f"observation.images.{name}": (
+                lambda port=port: np.array(port.Eval(context).data[:, :, :3])
+            )
+            for name, port in self._images.items()
+        }
+        obs = Observation(values, images)
+        #: The measured poses behind it (name -> X_WB) and each finger's opening (m).
+        obs.cube_poses, obs.finger = X_cubes, float(hand[0])
+        self._observed = (key, obs)
         return obs
 
     # --- one step -----------------------------------------------------------------------
@@ -151,7 +179,7 @@ class PolicySource(LeafSystem):
             answer = guarded(
                 self.label, self.policy.act, obs, exit_code=DURING, budget_s=ACT_BUDGET_S
             )
-            action, said_done = answer if isinstance(answer, tuple) else (answer, False)
+            action, said_done = spaces.read_answer(answer, self.label)
             if said_done and action is None:
                 self.done = True
                 return
@@ -161,8 +189,7 @@ class PolicySource(LeafSystem):
             )
             self.last_action = a
             if self.space == "joint_chunk":
-                execute = int(self.options.get("execute", len(a)))
-                self._chunk.extend(a[:execute])
+                self._chunk.extend(a[: spaces.periods(self.space, self.options)])
             elif self.space == "ee_delta":
                 X_WG = self._poses.Eval(context)[self.world.hand_body].multiply(
                     self.world.X_hand_grasp
@@ -195,14 +222,26 @@ class PolicySource(LeafSystem):
 
 
 def make_policy(spec: str, options: dict):
-    """The policy ``spec`` (``module:attribute``) names, built with ``options``; checked for
-    the protocol (``reset``, ``act``)."""
+    """The policy ``spec`` (``module:attribute``) names, built with ``options`` (less the
+    action space's own); checked for the protocol (``reset``, ``act``)."""
     from cake_drake.plugins import require, resolve
 
     factory = resolve(spec, {}, "policy")
     policy = factory(**{k: v for k, v in options.items() if k not in ("horizon", "execute")})
     require(policy, spec, "policy", ("reset", "act"))
     return policy
+
+
+def policy_of(ref) -> tuple[str, dict]:
+    """The factory and keyword arguments a ``!Policy`` reference names: its ``factory``
+    and ``options``, or, for a ``checkpoint``, the learned layer's adapter (through the
+    plug-in door) with the folder and device."""
+    if ref.checkpoint:
+        from cake_drake.pipeline import CHECKPOINT_POLICY
+        from cake_drake.scenario import resolve_path
+
+        return CHECKPOINT_POLICY, {"path": str(resolve_path(ref.checkpoint)), "device": ref.device}
+    return ref.factory, dict(ref.options)
 
 
 __all__ = ["PolicySource", "PolicyTask", "make_policy", "PluginError"]

@@ -134,6 +134,17 @@ def spread_slots(
 
 
 @dataclass
+class Placement:
+    """Seeded variation of where the cubes start: each tower's place moved by up to ``xy``
+    (m, in x and in y) and each cube turned about z by up to ``yaw_deg``, drawn from the
+    run's seed. Towers never come closer than ``world.slot_spacing``; zeros (the default)
+    keep the exercise's fixed slots."""
+
+    xy: float = 0.0
+    yaw_deg: float = 0.0
+
+
+@dataclass
 class WorldConfig:
     """How the world is simulated. The defaults hold a tower of ten cubes at 10 ms steps.
 
@@ -153,6 +164,8 @@ class WorldConfig:
     slot_radius: float = SLOT_RADIUS  # m: table slots on this arc around the base
     slot_spacing: float = SLOT_SPACING  # m between neighbouring slots, at least
     slot_spacing_max: float = SLOT_SPACING_MAX  # m between them, at most (few slots needed)
+    #: Seeded variation of the cubes' start (learning tasks): none by default.
+    placement: Placement = field(default_factory=Placement)
 
     @property
     def slots(self) -> tuple[tuple[float, float], ...]:
@@ -456,6 +469,41 @@ def layout(
             z = CUBE_SIZE / 2 + level * CUBE_SIZE - (level + 1) * LAYOUT_PRELOAD
             poses[name] = RigidTransform(RollPitchYaw(0, 0, yaw), [x, y, z])
     return poses
+
+
+def jittered(
+    poses: Mapping[str, RigidTransform],
+    towers: Sequence[Sequence[str]],
+    placement: Placement,
+    seed: int,
+    spacing: float,
+) -> dict[str, RigidTransform]:
+    """``poses`` (from :func:`layout`) with each tower moved and each cube turned as
+    ``placement`` says, drawn from ``seed``: the same seed, the same world. Towers keep at
+    least ``spacing`` between their centres (redrawn until they do)."""
+    if placement.xy == 0.0 and placement.yaw_deg == 0.0:
+        return dict(poses)
+    rng = np.random.default_rng([abs(int(seed)), 7919])
+    bases = [np.asarray(poses[t[0]].translation()[:2]) for t in towers if t]
+    for _ in range(1000):
+        shift = rng.uniform(-placement.xy, placement.xy, size=(len(bases), 2))
+        centres = [b + s for b, s in zip(bases, shift, strict=True)]
+        if all(
+            np.linalg.norm(centres[i] - centres[j]) >= spacing - 1e-9
+            for i in range(len(centres))
+            for j in range(i)
+        ):
+            break
+    else:  # no draw kept the towers apart: keep the slots themselves
+        shift = np.zeros((len(bases), 2))
+    out = dict(poses)
+    for tower, (dx, dy) in zip([t for t in towers if t], shift, strict=True):
+        for name in tower:
+            X = poses[name]
+            yaw = math.radians(rng.uniform(-placement.yaw_deg, placement.yaw_deg))
+            R = RollPitchYaw(0, 0, yaw).ToRotationMatrix().multiply(X.rotation())
+            out[name] = RigidTransform(R, X.translation() + [dx, dy, 0.0])
+    return out
 
 
 def set_cube_poses(scene: Scene, context, poses: Mapping[str, RigidTransform]) -> None:

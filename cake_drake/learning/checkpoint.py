@@ -1,0 +1,172 @@
+"""A trained LeRobot policy in the slot: a checkpoint folder as a cake_drake policy.
+
+:class:`CheckpointPolicy` loads a LeRobot ``PreTrainedPolicy`` and its pre- and
+post-processors from a folder (one written by ``python -m cake_drake.train``, or any
+LeRobot checkpoint folder), resets its action queue at each episode's ``reset``, and at
+each ``act`` maps the observation (the slot's ``observation.*`` keys, or the Gym env's
+``state`` / ``environment_state`` / ``images``) onto the features the policy was trained
+on, runs it on the CPU or a GPU, and answers with one action of the space it was trained
+in. The same adapter serves ``evaluate``, a run (``reference: !Policy {checkpoint: DIR}``)
+and the Gym env (``make(path=DIR)`` as any policy plug-in).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from cake_drake.errors import InputError
+
+#: Action size of each action space a checkpoint can answer in (a chunk is not learned).
+ACTION_SIZE = {"joint_position": 8, "ee_delta": 7}
+
+
+def model_folder(path: Path) -> Path:
+    """The folder with the policy's ``config.json`` and weights: ``path`` itself, or the
+    last checkpoint of a training folder (``checkpoints/last/pretrained_model``)."""
+    path = Path(path)
+    for candidate in (
+        path,
+        path / "pretrained_model",
+        path / "checkpoints" / "last" / "pretrained_model",
+    ):
+        if (candidate / "config.json").is_file() and (candidate / "model.safetensors").is_file():
+            return candidate
+    if not path.exists():
+        raise InputError(f"{path}: no such checkpoint folder")
+    raise InputError(
+        f"{path}: not a LeRobot checkpoint (no config.json and model.safetensors here, nor "
+        "in checkpoints/last/pretrained_model); give a folder written by cake_drake.train"
+    )
+
+
+def _config(folder: Path) -> dict:
+    try:
+        return json.loads((folder / "config.json").read_text())
+    except (OSError, ValueError) as e:
+        raise InputError(f"{folder / 'config.json'}: unreadable ({e})") from None
+
+
+def action_size(folder: Path) -> int:
+    """The size of the action the checkpoint in ``folder`` predicts."""
+    config = _config(folder)
+    try:
+        return int(config["output_features"]["action"]["shape"][0])
+    except (KeyError, IndexError, TypeError, ValueError):
+        raise InputError(
+            f"{folder / 'config.json'}: names no action feature (output_features.action)"
+        ) from None
+
+
+def device_for(device: str) -> str:
+    """``auto`` is a CUDA GPU where torch sees one, else the CPU; ``cuda`` without one is
+    refused (one line, exit 2)."""
+    if device not in ("auto", "cpu", "cuda"):
+        raise InputError(f"device {device!r}; choose one of: auto, cpu, cuda")
+    if device == "cpu":
+        return "cpu"
+    import torch
+
+    if torch.cuda.is_available():
+        return "cuda"
+    if device == "cuda":
+        raise InputError("device cuda: torch sees no CUDA GPU here; use --device cpu (or auto)")
+    return "cpu"
+
+
+def check_folder(path: Path, action_space: str, device: str = "auto") -> Path:
+    """Refuse, before anything is built, a folder that is no checkpoint, one whose action
+    does not fit ``action_space``, or a device that is not here; the model's folder."""
+    folder = model_folder(path)
+    size = action_size(folder)
+    want = ACTION_SIZE.get(action_space)
+    if want is None:
+        raise InputError(
+            f"{path}: a checkpoint answers in {' or '.join(ACTION_SIZE)}, not {action_space}"
+        )
+    if size != want:
+        fits = [k for k, v in ACTION_SIZE.items() if v == size]
+        raise InputError(
+            f"{path}: the checkpoint predicts {size} numbers an action; {action_space} takes "
+            f"{want}" + (f" (it was trained in {fits[0]})" if fits else "")
+        )
+    device_for(device)
+    return folder
+
+
+class CheckpointPolicy:
+    """See the module's docstring."""
+
+    def __init__(self, path: str, device: str = "auto") -> None:
+        os.environ.setdefault("HF_HUB_OFFLINE", "1")
+        self.path = Path(path)
+        self.folder = model_folder(self.path)
+        self.device = device_for(device)
+        self._policy = None
+
+    def _load(self) -> None:
+        import torch  # noqa: F401 - lerobot's policies are torch modules
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        config = PreTrainedConfig.from_pretrained(self.folder)
+        config.device = self.device
+        policy = get_policy_class(config.type).from_pretrained(self.folder, config=config)
+        policy.to(self.device).eval()
+        self._pre, self._post = make_pre_post_processors(
+            config,
+            pretrained_path=str(self.folder),
+            preprocessor_overrides={"device_processor": {"device": self.device}},
+        )
+        self._inputs = dict(config.input_features)
+        self._policy = policy
+
+    def reset(self, task, seed: int) -> None:
+        space = getattr(task, "action_space", "joint_position")
+        check_folder(self.path, space, self.device)
+        if self._policy is None:
+            self._load()
+        self._policy.reset()  # a new episode: no actions left from the last one
+        self._pre.reset()
+        self._post.reset()
+
+    def batch(self, observation) -> dict:
+        """The policy's inputs from a slot or Gym observation, batched (1, ...)."""
+        import torch
+
+        def get(slot_key, env_key, part=None):
+            if slot_key in observation:
+                return np.asarray(observation[slot_key])
+            value = observation[env_key] if part is None else observation[env_key][part]
+            return np.asarray(value)
+
+        batch = {}
+        for key in self._inputs:
+            if key == "observation.state":
+                value = get(key, "state")[:8]
+            elif key == "observation.environment_state":
+                value = get(key, "environment_state")
+            elif key.startswith("observation.images."):
+                name = key[len("observation.images.") :]
+                image = get(key, "images", name)
+                value = np.ascontiguousarray(image.transpose(2, 0, 1)).astype(np.float32) / 255.0
+            else:
+                raise InputError(f"{self.folder}: the policy reads {key}, which no observation has")
+            batch[key] = torch.as_tensor(np.asarray(value, np.float32)).unsqueeze(0)
+        return batch
+
+    def act(self, observation) -> np.ndarray:
+        import torch
+
+        with torch.inference_mode():
+            action = self._policy.select_action(self._pre(self.batch(observation)))
+            action = self._post(action)
+        return action.squeeze(0).cpu().numpy().astype(np.float64)
+
+
+def make(path: str, device: str = "auto") -> CheckpointPolicy:
+    """A checkpoint folder as a policy plug-in (``evaluate DIR``, ``!Policy {checkpoint}``)."""
+    return CheckpointPolicy(path, device)

@@ -1,0 +1,220 @@
+"""Training through LeRobot's own loop, offline: a recording in, a LeRobot checkpoint out.
+
+:func:`train` builds lerobot's ``TrainPipelineConfig`` from a recipe (the
+:class:`cake_drake.scenario.Training` of the recording's task, or flags) and calls
+lerobot's ``train`` - its data loader, processors, optimiser, progress bar and checkpoints.
+Nothing is fetched: the dataset is read from its folder, the hub is off, and vision
+backbones start from scratch unless a weights file is named. The checkpoint is LeRobot's
+layout (``OUT/checkpoints/last/pretrained_model``), which ``evaluate``, a run's
+``!Policy {checkpoint: OUT}`` and the Gym env load through
+:mod:`cake_drake.learning.checkpoint`. ``resume`` continues ``OUT``'s last checkpoint.
+
+What a policy reads (``inputs``): ``state`` is ``observation.state`` and
+``observation.environment_state`` (the cubes' poses and the goal), ``images`` the cameras
+(with ``observation.state``), ``both`` all of them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import sys
+from dataclasses import asdict
+from pathlib import Path
+
+from cake_drake.errors import InputError
+from cake_drake.learning import dataset as datasets
+from cake_drake.scenario import Training
+
+POLICIES = ("act", "diffusion")
+INPUTS = ("state", "images", "both")
+#: What the output folder holds (nothing else is written there).
+TRAIN_OUTPUTS = ("checkpoints", "train.json")
+
+
+def recipe_of(root: Path) -> tuple[Training, dict]:
+    """The recipe a recording's task ships (``report.json``'s ``training``), or the default;
+    and the recording's report."""
+    report_path = Path(root) / "report.json"
+    report = {}
+    if report_path.is_file():
+        try:
+            report = json.loads(report_path.read_text())
+        except ValueError:
+            report = {}
+    fields = report.get("training") or {}
+    known = {k: v for k, v in fields.items() if k in Training.__dataclass_fields__}
+    return Training(**known), report
+
+
+def _features(root: Path) -> dict:
+    info = json.loads((Path(root) / "meta" / "info.json").read_text())
+    return info["features"]
+
+
+def input_keys(features: dict, inputs: str, root: Path) -> list[str]:
+    """The dataset's features the policy reads; one line (exit 2) when the dataset lacks
+    what ``inputs`` needs."""
+    images = [k for k, f in features.items() if f.get("dtype") in ("video", "image")]
+    keys = []
+    if "observation.state" in features:
+        keys.append("observation.state")
+    if inputs in ("state", "both"):
+        if "observation.environment_state" not in features:
+            raise InputError(
+                f"{root}: no observation.environment_state (the cubes' poses and the goal), "
+                "which a state policy needs: record it again with python -m cake_drake.record"
+            )
+        keys.append("observation.environment_state")
+    if inputs in ("images", "both"):
+        if not images:
+            raise InputError(
+                f"{root}: no camera features, which --inputs {inputs} needs; record with "
+                "cameras, or train with --inputs state"
+            )
+        keys += images
+    return keys
+
+
+def check(
+    root: Path,
+    out: Path,
+    recipe: Training,
+    device: str,
+    resume: bool,
+) -> list[str]:
+    """Everything refused before training starts: the dataset's files and features, the
+    recipe, the device, the output folder. The input features to train on."""
+    from cake_drake.learning.checkpoint import device_for
+
+    root, out = Path(root), Path(out)
+    if not root.is_dir():
+        raise InputError(f"{root}: no such dataset folder")
+    gone = datasets.missing_files(root)
+    if gone:
+        raise InputError(f"{root / gone[0]}: missing from the dataset; not a LeRobot dataset")
+    if recipe.policy not in POLICIES:
+        raise InputError(f"--policy {recipe.policy!r}; choose one of: {', '.join(POLICIES)}")
+    if recipe.inputs not in INPUTS:
+        raise InputError(f"--inputs {recipe.inputs!r}; choose one of: {', '.join(INPUTS)}")
+    for name, lo, hi in (("steps", 1, 10_000_000), ("batch_size", 1, 4096)):
+        value = getattr(recipe, name)
+        if not (isinstance(value, int) and lo <= value <= hi):
+            raise InputError(f"--{name.replace('_', '-')} {value!r}: a whole number, {lo} to {hi}")
+    if not 1 <= recipe.n_action_steps <= recipe.chunk_size:
+        raise InputError(
+            f"training.n_action_steps {recipe.n_action_steps}: 1 to chunk_size "
+            f"({recipe.chunk_size})"
+        )
+    device_for(device)
+    keys = input_keys(_features(root), recipe.inputs, root)
+    last = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+    if resume and not last.is_file():
+        raise InputError(f"{out}: no checkpoint to resume (no {last.relative_to(out)})")
+    if not resume and out.exists() and any(out.iterdir()):
+        raise InputError(
+            f"{out}: not empty; --resume continues its training, or choose another --out"
+        )
+    return keys
+
+
+def _policy_config(recipe: Training, device: str, weights: str | None):
+    """lerobot's config of the recipe's policy (sizes from the recipe; nothing pretrained
+    unless ``weights`` names a file)."""
+    if recipe.policy == "act":
+        from lerobot.policies.act.configuration_act import ACTConfig
+
+        return ACTConfig(
+            device=device,
+            push_to_hub=False,
+            pretrained_backbone_weights=weights,
+            dim_model=recipe.dim_model,
+            n_heads=recipe.n_heads,
+            dim_feedforward=recipe.dim_feedforward,
+            n_encoder_layers=recipe.n_encoder_layers,
+            n_vae_encoder_layers=recipe.n_encoder_layers,
+            chunk_size=recipe.chunk_size,
+            n_action_steps=recipe.n_action_steps,
+            optimizer_lr=recipe.lr,
+            optimizer_lr_backbone=recipe.lr,
+        )
+    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+
+    horizon = max(8, 1 << (recipe.chunk_size - 1).bit_length())  # the U-Net halves it
+    return DiffusionConfig(
+        device=device,
+        push_to_hub=False,
+        pretrained_backbone_weights=weights,
+        down_dims=tuple(recipe.down_dims),
+        horizon=horizon,
+        n_action_steps=min(recipe.n_action_steps, horizon - 1),
+        optimizer_lr=recipe.lr,
+        crop_shape=None,
+    )
+
+
+@contextlib.contextmanager
+def _argv(args: list[str]):
+    """lerobot's configs read ``sys.argv`` (for ``--policy.path``, ``--config_path``)."""
+    saved = sys.argv
+    sys.argv = ["lerobot-train", *args]
+    try:
+        yield
+    finally:
+        sys.argv = saved
+
+
+def train(
+    root: Path,
+    out: Path,
+    recipe: Training,
+    device: str = "auto",
+    seed: int = 0,
+    resume: bool = False,
+    weights: str | None = None,
+    repo_id: str = datasets.REPO_ID,
+) -> Path:
+    """Train ``recipe`` on the dataset at ``root`` into ``out`` with lerobot's own loop (see
+    the module); the checkpoint's folder."""
+    from cake_drake.learning.checkpoint import device_for
+
+    keys = check(root, out, recipe, device, resume)
+    datasets.require_lerobot()
+    os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+    from lerobot.configs.default import DatasetConfig
+    from lerobot.configs.train import TrainPipelineConfig
+    from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
+    from lerobot.datasets.utils import dataset_to_policy_features
+    from lerobot.scripts.lerobot_train import train as lerobot_train
+
+    out = Path(out)
+    where = device_for(device)
+    if resume:
+        config = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+        with _argv([f"--config_path={config}", "--resume=true", f"--steps={recipe.steps}"]):
+            lerobot_train()
+    else:
+        meta = LeRobotDatasetMetadata(repo_id, root=root)
+        features = dataset_to_policy_features(meta.features)
+        policy = _policy_config(recipe, where, weights)
+        policy.input_features = {k: features[k] for k in keys}
+        policy.output_features = {"action": features["action"]}
+        cfg = TrainPipelineConfig(
+            dataset=DatasetConfig(repo_id=repo_id, root=str(root), video_backend="pyav"),
+            policy=policy,
+            output_dir=out,
+            steps=recipe.steps,
+            batch_size=recipe.batch_size,
+            seed=seed,
+            num_workers=0,
+            save_freq=recipe.steps,
+            log_freq=max(1, min(200, recipe.steps // 10)),
+            eval_freq=0,
+        )
+        with _argv([]):
+            lerobot_train(cfg)
+    (out / "train.json").write_text(
+        json.dumps({"dataset": str(root), "recipe": asdict(recipe), "seed": seed}, indent=2) + "\n"
+    )
+    return out / "checkpoints" / "last" / "pretrained_model"

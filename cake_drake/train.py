@@ -1,0 +1,13 @@
+"""``python -m cake_drake.train DATASET --out DIR``: a policy trained with LeRobot's own loop.
+
+The argument parsing lives in :mod:`cake_drake.cli`; the library is
+:mod:`cake_drake.learning.train`.
+"""
+
+import sys
+
+from cake_drake.cli import main_train
+from cake_drake.errors import run_cli
+
+if __name__ == "__main__":
+    sys.exit(run_cli(main_train))
