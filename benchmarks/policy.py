@@ -27,6 +27,7 @@ import gymnasium  # noqa: E402
 from machine import machine  # noqa: E402 - benchmarks/machine.py
 
 from cake_drake.learning.evaluation import wilson  # noqa: E402
+from cake_drake.world.cameras import renderer_line  # noqa: E402
 
 ENV_ID = "cake_drake.gym:CakeDrake/Stack-v0"
 CHUNK = {"horizon": 10, "execute": 5}
@@ -104,6 +105,7 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=200, help="environment steps per row of (a)")
     args = p.parse_args()
     print(machine())
+    print(renderer_line())  # the GL implementation the cameras render with: a GPU or llvmpipe
     print(f"(a) environment steps per second, 10 Hz control, 10 ms steps, {args.steps} steps")
     print(f"{'control mode':<16}{'obs mode':<12}{'env steps/s':>12}{'control periods/s':>19}")
     for mode in ("ee_delta", "joint_position", "joint_chunk"):

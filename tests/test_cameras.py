@@ -14,7 +14,14 @@ from cake_drake.errors import InputError
 from cake_drake.geometric.ik import DrakeIk, Kinematics
 from cake_drake.pipeline import check
 from cake_drake.scenario import Scenario, parse_scenario
-from cake_drake.world.cameras import Camera, add_cameras, default_cameras, grab
+from cake_drake.world.cameras import (
+    Camera,
+    add_cameras,
+    default_cameras,
+    grab,
+    renderer_in_use,
+    renderer_line,
+)
 from cake_drake.world.scene import (
     Q_HOME,
     X_HAND_GRASP,
@@ -141,3 +148,54 @@ def test_a_run_with_cameras_writes_each_cameras_last_frame(tmp_path):
         data = (tmp_path / "o" / f"camera_{name}.png").read_bytes()
         assert data.startswith(b"\x89PNG") and len(data) > 2000
     assert "cameras:" in (tmp_path / "o" / "scenario.yaml").read_text()
+    # The run names the GL implementation it rendered with: the one this process finds
+    # (same machine, same libraries, same default device).
+    import json
+
+    renderer = json.loads((tmp_path / "o" / "summary.json").read_text())["renderer"]
+    assert renderer == renderer_in_use()
+    assert renderer["backend"] == "EGL" and renderer["vendor"] and renderer["device"]
+
+
+#: The EGL vendor libraries glvnd loads, by the vendor string their displays report.
+EGL_VENDOR_LIBRARIES = {"mesa": "libEGL_mesa.so", "nvidia": "libEGL_nvidia.so"}
+#: Mesa's software rasteriser (llvmpipe), as a DRI driver or (Mesa 24 on) libgallium.
+SOFTWARE_RASTERISER = ("swrast_dri.so", "libgallium")
+
+
+def _loaded_libraries() -> set[str]:
+    with open("/proc/self/maps") as f:
+        return {line.split()[-1].rsplit("/", 1)[-1] for line in f if "/" in line}
+
+
+def test_the_renderer_in_use_is_the_driver_this_process_loaded_for_it():
+    cameras = [Camera(name="top", xyz=[0.4, 0.0, 1.0], target=[0.4, 0.0, 0.0])]
+    _, sensors, _, context = _world([], {}, cameras)
+    grab(sensors, cameras, context)
+    renderer = renderer_in_use()
+    assert renderer["backend"] == "EGL" and renderer["device"] and renderer["version"]
+    loaded = _loaded_libraries()
+    vendor = [k for k in EGL_VENDOR_LIBRARIES if k in renderer["vendor"].lower()]
+    assert vendor, f"an EGL vendor of its own: {renderer['vendor']!r}"
+    library = EGL_VENDOR_LIBRARIES[vendor[0]]
+    assert any(name.startswith(library) for name in loaded), f"{library} is not loaded"
+    if "llvmpipe" in renderer["device"]:  # no GPU: Mesa's software rasteriser renders
+        assert vendor == ["mesa"]
+        assert any(name.startswith(SOFTWARE_RASTERISER) for name in loaded), sorted(loaded)
+    assert renderer_line().startswith(f"renderer: EGL, {renderer['vendor']}, {renderer['device']}")
+
+
+def test_before_any_frame_the_renderer_is_found_by_rendering_one():
+    """A thread that has rendered nothing has no EGL context: one small frame is rendered
+    to ask VTK's own, and the answer is the one a camera's thread gets."""
+    import threading
+
+    cameras = [Camera(name="top", xyz=[0.4, 0.0, 1.0], target=[0.4, 0.0, 0.0])]
+    _, sensors, _, context = _world([], {}, cameras)
+    before = grab(sensors, cameras, context)["top"]
+    seen = {}
+    thread = threading.Thread(target=lambda: seen.update(renderer_in_use()))
+    thread.start()
+    thread.join()
+    assert seen == renderer_in_use()
+    assert np.array_equal(grab(sensors, cameras, context)["top"], before)  # still renders

@@ -15,6 +15,7 @@ from cake_drake.outputs.replay import write_replay
 from cake_drake.outputs.worker import OutputWorker
 from cake_drake.scenario import dump_scenario
 from cake_drake.symbolic import fact_str, write_plan
+from cake_drake.world.cameras import renderer_in_use
 
 
 def gravity_torques(control_plant, q: np.ndarray) -> np.ndarray:
@@ -100,6 +101,8 @@ def summary(result) -> dict:
         else None,
         "policy": _policy(cake.reference.policy),
         "motion_planner": _motion_planner(scenario, cake.reference.waypoint_ik),
+        # The GL implementation the cameras were rendered with (a GPU, or llvmpipe).
+        "renderer": renderer_in_use() if cake.cameras else None,
     }
 
 

@@ -9,9 +9,11 @@ along +z, with +x to the right of the image and +y down.
 Images are evaluated when asked for (a policy's step, a recording's frame): ``rate_hz``
 is how often a policy or a recording samples the camera, not a rate the simulation
 renders at. VTK renders through EGL on Mesa's software rasteriser: no display and no GPU
-(Debian: libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1).
+(Debian: libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1); where NVIDIA's EGL is installed,
+VTK picks it by itself, and :func:`renderer_in_use` says which one a process renders with.
 """
 
+import ctypes
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -171,3 +173,94 @@ def grab(sensors: dict, cameras: Sequence[Camera], root_context) -> dict[str, np
             depth = sensor.depth_image_32F_output_port().Eval(context).data
             images[f"{c.name}.depth"] = np.array(depth[:, :, 0], copy=True)
     return images
+
+
+# EGL and OpenGL enums (EGL 1.5, OpenGL 1.0): the strings renderer_in_use reads.
+_EGL_VENDOR = 0x3053
+_GL_VENDOR, _GL_RENDERER, _GL_VERSION = 0x1F00, 0x1F01, 0x1F02
+
+
+def renderer_in_use() -> dict[str, str | None]:
+    """The GL implementation VTK renders with in this process, asked of its own context.
+
+    After a render, VTK's EGL context stays current on the thread that rendered; its
+    display names the EGL vendor (``Mesa Project``, ``NVIDIA``) and OpenGL names the
+    device (``llvmpipe (LLVM ...)``: Mesa's software rasteriser, or the GPU's name). When
+    no EGL context is current (nothing rendered on this thread yet), one 16 x 16 frame of
+    an empty world is rendered first, through the same ``RenderEngineVtk``. Returns
+    ``{"backend", "vendor", "device", "version"}``; the strings are None where EGL could
+    not be asked (no libEGL, or VTK made no EGL context)."""
+    info = _current_egl_context()
+    if info is None:
+        probe = _render_probe()  # keeps VTK's context alive while it is asked
+        info = _current_egl_context()
+        del probe
+    unknown = {"vendor": None, "device": None, "version": None}
+    return {"backend": "EGL" if info else None, **(info or unknown)}
+
+
+def renderer_line() -> str:
+    """:func:`renderer_in_use` as one line: ``renderer: EGL, Mesa Project, llvmpipe (...)``."""
+    r = renderer_in_use()
+    if r["backend"] is None:
+        return "renderer: unknown (no EGL context)"
+    return f"renderer: {r['backend']}, {r['vendor']}, {r['device']}, OpenGL {r['version']}"
+
+
+def _current_egl_context() -> dict[str, str] | None:
+    """Vendor, device and version of the EGL context current on this thread, or None."""
+    try:
+        egl = ctypes.CDLL("libEGL.so.1")  # the library VTK loaded: the same handle
+    except OSError:
+        return None
+    egl.eglGetCurrentContext.restype = ctypes.c_void_p
+    egl.eglGetCurrentDisplay.restype = ctypes.c_void_p
+    egl.eglQueryString.restype = ctypes.c_char_p
+    egl.eglQueryString.argtypes = [ctypes.c_void_p, ctypes.c_int]
+    egl.eglGetProcAddress.restype = ctypes.c_void_p
+    egl.eglGetProcAddress.argtypes = [ctypes.c_char_p]
+    display = egl.eglGetCurrentDisplay()
+    if not egl.eglGetCurrentContext() or not display:
+        return None
+    address = egl.eglGetProcAddress(b"glGetString")
+    if not address:
+        return None
+    gl_get_string = ctypes.CFUNCTYPE(ctypes.c_char_p, ctypes.c_uint)(address)
+
+    def text(value: bytes | None) -> str | None:
+        return value.decode(errors="replace") if value else None
+
+    return {
+        "vendor": text(egl.eglQueryString(display, _EGL_VENDOR)) or text(gl_get_string(_GL_VENDOR)),
+        "device": text(gl_get_string(_GL_RENDERER)),
+        "version": text(gl_get_string(_GL_VERSION)),
+    }
+
+
+def _render_probe():
+    """Render one 16 x 16 frame of an empty world with ``RenderEngineVtk`` on this thread;
+    returns what must stay alive for its context to stay current."""
+    from pydrake.geometry import SceneGraph
+
+    builder = DiagramBuilder()
+    sg = builder.AddSystem(SceneGraph())
+    try:
+        sg.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
+    except RuntimeError:
+        return None
+    core = RenderCameraCore(
+        RENDERER, CameraInfo(16, 16, 1.0), ClippingRange(0.1, 1.0), RigidTransform()
+    )
+    sensor = builder.AddSystem(
+        RgbdSensor(
+            sg.world_frame_id(),
+            RigidTransform(),
+            ColorRenderCamera(core, False),
+            DepthRenderCamera(core, DepthRange(0.11, 0.9)),
+        )
+    )
+    builder.Connect(sg.get_query_output_port(), sensor.query_object_input_port())
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(context))
+    return diagram, context
