@@ -1,10 +1,15 @@
 # Two entry points: `make run` (the main job) and `make test` (the test suite).
 # Each first makes sure the Debian packages it needs (system-packages.txt) are installed,
-# then creates or refreshes .venv from pyproject.toml.
+# then creates or refreshes .venv from pyproject.toml: `make run` with the base
+# dependencies only (what `python -m cake_drake.run` imports), `make test` with the
+# `test` extra on top (the optional planners, OMPL, Ray, Gymnasium, LeRobot with torch).
+# One .venv for both: `make test` after `make run` adds the extras, `make run` after
+# `make test` installs nothing.
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-STAMP := $(VENV)/.installed
+RUN_STAMP := $(VENV)/.installed-run
+TEST_STAMP := $(VENV)/.installed-test
 SYSTEM_PACKAGES := system-packages.txt
 
 .PHONY: run test notebooks lint bench clean venv system-packages-run system-packages-test
@@ -47,33 +52,43 @@ $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
-$(STAMP): pyproject.toml | $(VENV)/bin/python
+# The base dependencies: refreshed when pyproject.toml changes. pip leaves installed
+# extras alone (it removes nothing and upgrades only what a requirement asks for).
+$(RUN_STAMP): pyproject.toml | $(VENV)/bin/python
+	$(PY) -m pip install --quiet -e .
+	touch $(RUN_STAMP)
+
+# The test extra on top: after the base install (so a changed pyproject.toml refreshes
+# the base first, and both stamps are current afterwards).
+$(TEST_STAMP): $(RUN_STAMP)
 	$(PY) -m pip install --quiet -e '.[test]'
-	touch $(STAMP)
+	touch $(TEST_STAMP)
 
 # The package's bytecode, compiled here rather than by each run: an editable install
 # has none, and where PYTHONDONTWRITEBYTECODE is set Python would compile every module
 # anew in every run (~0.1 s of each `python -m cake_drake.run`).
 BYTECODE := $(VENV)/.bytecode
-$(BYTECODE): $(STAMP) $(shell find cake_drake -name '*.py')
+$(BYTECODE): $(RUN_STAMP) $(shell find cake_drake -name '*.py')
 	$(PY) -m compileall -q cake_drake
 	touch $(BYTECODE)
 
-venv: $(BYTECODE)
+# The development environment: everything `make test` installs.
+venv: $(TEST_STAMP) $(BYTECODE)
 
 run: system-packages-run $(BYTECODE)
 	$(PY) -m cake_drake.run --mode torque
 
-test: system-packages-test $(BYTECODE)
+test: system-packages-test $(TEST_STAMP) $(BYTECODE)
 	$(PY) -m pytest
 
-notebooks: system-packages-test $(BYTECODE)
+notebooks: system-packages-test $(TEST_STAMP) $(BYTECODE)
 	$(PY) notebooks/refresh.py
 
-lint: $(BYTECODE)
+lint: $(TEST_STAMP) $(BYTECODE)
 	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
 
-bench: system-packages-run $(BYTECODE)
+# The planning table compares Fast Downward too (the test extra has it).
+bench: system-packages-run $(TEST_STAMP) $(BYTECODE)
 	$(PY) benchmarks/planning.py
 	$(PY) benchmarks/ik.py
 	$(PY) benchmarks/run.py

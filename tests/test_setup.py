@@ -11,10 +11,12 @@ from __future__ import annotations
 import ast
 import json
 import os
+import re
 import shlex
 import shutil
 import stat
 import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -283,3 +285,131 @@ def test_missing_packages_with_passwordless_sudo_are_installed_through_it(stubs)
 def test_nothing_to_do_when_everything_is_installed(stubs):
     r, calls = _make("system-packages-test", stubs, uid=1000, installed=True, sudo_ok=False)
     assert r.returncode == 0 and r.stdout == "" and r.stderr == "" and calls == ""
+
+
+# --- which Python packages each command installs ------------------------------------------
+#
+# `make run` installs the base dependencies only; `make test` adds the `test` extra on the
+# same .venv. Read from the Makefile with `make -n` (nothing is installed): the pip
+# commands each goal would run, from a fresh checkout and from each stamp's state.
+
+PIP_INSTALL = re.compile(r"-m pip install --quiet -e (\S+)")
+BASE, TEST = ".", "'.[test]'"
+
+
+def _installs(folder: Path, goal: str, stamps: dict[str, int]) -> list[str]:
+    """What ``make -n GOAL`` would ``pip install -e`` in a copy of the checkout's Makefile
+    whose .venv holds ``stamps`` (name -> seconds after pyproject.toml's last change)."""
+    work = folder / goal
+    (work / "cake_drake").mkdir(parents=True)
+    (work / "cake_drake" / "__init__.py").write_text("")
+    for name in ("Makefile", "pyproject.toml", "system-packages.txt"):
+        shutil.copy(ROOT / name, work / name)
+    changed = 1_700_000_000
+    os.utime(work / "pyproject.toml", (changed, changed))
+    os.utime(work / "cake_drake" / "__init__.py", (changed - 10, changed - 10))
+    if stamps:
+        (work / ".venv" / "bin").mkdir(parents=True)
+        (work / ".venv" / "bin" / "python").write_text("")
+        for name, after in {**stamps, ".bytecode": max(stamps.values())}.items():
+            (work / ".venv" / name).write_text("")
+            os.utime(work / ".venv" / name, (changed + after, changed + after))
+    r = subprocess.run(
+        [shutil.which("make"), "-n", "-C", str(work), goal],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 0, r.stderr
+    return [m.group(1) for m in PIP_INSTALL.finditer(r.stdout)]
+
+
+AFTER_RUN = {".installed-run": 5}
+AFTER_TEST = {".installed-run": 5, ".installed-test": 6}
+
+
+@pytest.mark.parametrize(
+    "state, stamps, run, test",
+    [
+        ("a fresh checkout", {}, [BASE], [BASE, TEST]),
+        ("after make run", AFTER_RUN, [], [TEST]),
+        ("after make test", AFTER_TEST, [], []),
+        ("pyproject.toml changed", {".installed-run": -5, ".installed-test": -4}, [BASE],
+         [BASE, TEST]),
+    ],
+)  # fmt: skip
+def test_make_run_installs_no_extra_and_make_test_adds_the_test_extra(
+    stubs, state, stamps, run, test
+):
+    assert _installs(stubs, "run", stamps) == run, state
+    assert _installs(stubs, "test", stamps) == test, state
+
+
+def test_the_stamps_test_reads_are_the_makefiles():
+    """The states above name the Makefile's own stamps (a renamed stamp fails here)."""
+    text = (ROOT / "Makefile").read_text()
+    for stamp in AFTER_TEST:
+        assert f"$(VENV)/{stamp}" in text, stamp
+    assert "pip install --quiet -e .\n" in text and "pip install --quiet -e '.[test]'" in text
+
+
+def _base_closure() -> set[str]:
+    """The distributions the base dependencies of pyproject.toml bring in (installed
+    requirements, followed without extras), names normalised."""
+    import tomllib
+    from importlib.metadata import PackageNotFoundError, requires
+
+    from packaging.requirements import Requirement
+
+    def norm(name: str) -> str:
+        return re.sub(r"[-_.]+", "-", name).lower()
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    todo = [Requirement(r) for r in project["dependencies"]]
+    seen = {norm(project["name"])}
+    while todo:
+        req = todo.pop()
+        if req.marker is not None and not req.marker.evaluate({"extra": ""}):
+            continue
+        if norm(req.name) in seen:
+            continue
+        seen.add(norm(req.name))
+        try:
+            todo += [Requirement(r) for r in requires(req.name) or []]
+        except PackageNotFoundError:
+            continue  # not installed here: nothing of it can be imported either
+    return seen
+
+
+@pytest.mark.slow
+def test_the_main_job_imports_only_what_the_base_dependencies_install(tmp_path):
+    """`make run` installs no extra, so `python -m cake_drake.run --mode torque` must not
+    import one (here every extra is installed, and would be found silently)."""
+    from importlib.metadata import packages_distributions
+
+    script = (
+        "import json, sys\n"
+        "before = {m.split('.')[0] for m in sys.modules}\n"
+        "from cake_drake.cli import main_run\n"
+        "from cake_drake.errors import run_cli\n"
+        "code = run_cli(main_run, ['--mode', 'torque', '--quiet', '--out', 'o'])\n"
+        "now = {m.split('.')[0] for m in sys.modules}\n"
+        "open('modules.json', 'w').write(json.dumps({'code': code, 'new': sorted(now - before)}))\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True,
+        timeout=600, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    found = json.loads((tmp_path / "modules.json").read_text())
+    assert found["code"] == 0, r.stderr
+    owners = packages_distributions()
+    closure = _base_closure()
+    outside = {
+        module: owners[module]
+        for module in found["new"]
+        if module in owners
+        and not any(re.sub(r"[-_.]+", "-", d).lower() in closure for d in owners[module])
+    }
+    assert not outside, f"imported from distributions outside the base dependencies: {outside}"
+    assert {"pydrake", "numpy", "pyperplan", "yaml"} <= set(found["new"])
