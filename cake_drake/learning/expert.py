@@ -79,6 +79,9 @@ REST_WAIT_S = 1.5
 #: The hand keeps up with its motion when this close (m, rad) to where the motion is at
 #: the last target or up to :data:`LAG_STEPS` steps before it: the motion's clock advances.
 TRACK_TOL = (0.025, 0.1)
+#: The hand is at a stop of its motion (where the fingers close or open) when this close
+#: (m, rad), or when it is still within :data:`TRACK_TOL`.
+ARRIVE_TOL = (0.004, 0.03)
 #: Steps the hand may trail its targets (a held target takes the controller a while).
 LAG_STEPS = 2
 #: The hand is off its motion when this far (m, rad): the motion is dropped and planned
@@ -92,6 +95,9 @@ STILL = 0.001
 GRIP_WAIT_S = 0.5
 #: Replans, repeated actions and dropped motions an episode may take before it gives up.
 MAX_REPAIRS = 20
+#: rad: a cube resting on nothing the facts name, still and tilted less than this, is
+#: picked up and put down on a table slot.
+STRANDED_TILT = 0.35
 #: m: a goal's stacked cube farther than this off the one below is set down again.
 LOOSE = 0.8 * STACK_TOL
 #: Speed limits' scale at 10 Hz: a 10 Hz step then moves the hand less than ``EE_STEP``.
@@ -241,6 +247,10 @@ class ClosedLoopExpert:
         self._waiting_since: int | None = None
         self._last: tuple[np.ndarray, float] | None = None
         self._previous_p: np.ndarray | None = None
+        self._still = False
+        self._previous_cubes: dict[str, RigidTransform] | None = None
+        self.stranded: set[str] = set()  # cubes taken as on the table (see act)
+        self._pending_pickups: tuple[str, ...] = ()
 
     def _set_plan(self, actions: tuple[GroundAction, ...]) -> None:
         self.plan = actions
@@ -255,24 +265,37 @@ class ClosedLoopExpert:
             self.steps,
             self.steps + (self.execute if self.space == "joint_chunk" else 1),
         )
-        still = self._previous_p is not None and (
+        still = self._still = self._previous_p is not None and bool(
             np.linalg.norm(m.X_WG.translation() - self._previous_p) < STILL
         )
         self._previous_p = m.X_WG.translation()
+        self._previous_cubes, previous = m.cubes, self._previous_cubes
         if self._last is None:
             self._last = (m.q, m.width)
         lost = lost_cubes(m.cubes)
         if lost:
             return self._end(f"no plan from the measured state: {lost[0]}")
         reading = read_facts(m.cubes, X_WG=m.X_WG, finger_opening=m.width / 2)
-        if reading.problems:  # falling or rolling: wait for the world to come to rest
+        canonical = self._stranded_facts(reading.facts, m)
+        if canonical is None:  # falling or rolling: wait for the world to come to rest
             since = step if self._waiting_since is None else self._waiting_since
             self._waiting_since = since
-            if (step - since) * self.dt >= REST_WAIT_S:
+            if (step - since) * self.dt < REST_WAIT_S:
+                return self._hold(m)
+            stuck = self._strandable(reading.facts, m, previous)
+            if stuck is None:
                 return self._end(f"no plan from the measured state: {reading.problems[0]}")
-            return self._hold(m)
+            # Still, but on nothing the facts can name (across two cubes, on a corner):
+            # taken as standing on the table, it is picked up and put down on a slot.
+            self.stranded |= stuck
+            self.current = None
+            if not self._repair("stranded", f"{', '.join(sorted(stuck))} rests on nothing", step):
+                return None, True
+            self.forced, self.next = 0, 0
+            self._pending_pickups = tuple(sorted(stuck))
+            canonical = self._stranded_facts(reading.facts, m)
         self._waiting_since = None
-        facts = self.roles.from_canonical(reading.facts) | self.static
+        facts = self.roles.from_canonical(canonical) | self.static
         a = self.current
         if a is not None:
             why = self._off(a, m, facts)
@@ -291,13 +314,13 @@ class ClosedLoopExpert:
                     self.next = a.pos + 1
                     a = self.current = None
         if a is None:
-            i = None if self.reason is not None else self._choose(facts, reading.facts, m, step)
+            i = None if self.reason is not None else self._choose(facts, canonical, m, step)
             if i is None:
                 return None, True
             if i == len(self.plan):
                 return self._end("goal reached")
             try:
-                a = self.current = self._start(i, m, reading.facts)
+                a = self.current = self._start(i, m, canonical)
             except CakeDrakeError as e:
                 return self._end(f"no motion for {self.plan[i]}: {e}")
         return self._answer(a, m, advance=True)
@@ -327,21 +350,15 @@ class ClosedLoopExpert:
         if self.next < self.forced and self.kernels[self.next] <= facts:
             return self.next
         self.forced = 0
+        if self._pending_pickups and ("arm-empty",) in canonical:
+            cube, self._pending_pickups = self._pending_pickups[0], self._pending_pickups[1:]
+            prefix = (self.roles.action(PICK, cube), self.roles.action(PLACE, cube))
+            return self._forced(prefix, facts)
         loose = self._loose(canonical, m.cubes)
         if loose and ("arm-empty",) in canonical:
             if not self._repair("re-place", f"{loose[0][1]} stands off {loose[0][2]}", step):
                 return None
-            prefix = self._re_place(loose[0], canonical)
-            state = dataclasses.replace(self.problem, init=frozenset(facts))
-            for action in prefix:
-                state = dataclasses.replace(state, init=apply_action(state, state.init, action))
-            rest = self._plan_from(state.init)
-            if rest is None:
-                return None
-            self._set_plan(prefix + rest)
-            self.events[-1]["new_plan"] = [str(a) for a in self.plan]
-            self.forced, self.next = len(prefix), 0
-            return 0
+            return self._forced(self._re_place(loose[0], canonical), facts)
         i = latest_kernel(self.kernels, facts)
         if i is None:
             if not self._repair("replan", "no kernel of the plan holds", step):
@@ -356,6 +373,46 @@ class ClosedLoopExpert:
             self.events.append({"step": step, "kind": "repeat", "why": str(self.plan[i])})
         self.next = i
         return i
+
+    def _forced(self, prefix: tuple[GroundAction, ...], facts) -> int | None:
+        """A plan of ``prefix``, done in order, then the planner's from where it leads."""
+        state = dataclasses.replace(self.problem, init=frozenset(facts))
+        for action in prefix:
+            state = dataclasses.replace(state, init=apply_action(state, state.init, action))
+        rest = self._plan_from(state.init)
+        if rest is None:
+            return None
+        self._set_plan(prefix + rest)
+        self.events[-1]["new_plan"] = [str(a) for a in self.plan]
+        self.forced, self.next = len(prefix), 0
+        return 0
+
+    def _located(self, canonical) -> set[str]:
+        return {f[1] for f in canonical if f[0] in ("on", "on-table", "holding")}
+
+    def _stranded_facts(self, canonical, m: Measured):
+        """The facts read, with each stranded cube (see :meth:`act`) on the table and clear
+        when nothing is on it; None while another cube cannot be read."""
+        unread = set(self.cubes) - self._located(canonical)
+        self.stranded &= unread  # one that reads again is no longer stranded
+        if unread - self.stranded:
+            return None
+        under = {f[2] for f in canonical if f[0] == "on"}
+        extra = {("on-table", c) for c in self.stranded}
+        extra |= {("clear", c) for c in self.stranded if c not in under}
+        return frozenset(canonical) | extra
+
+    def _strandable(self, canonical, m: Measured, before) -> set[str] | None:
+        """The cubes that read as nothing but stand still and nearly upright, if all do."""
+        unread = set(self.cubes) - self._located(canonical) - self.stranded
+        before = before or {}
+        for c in unread:
+            X = m.cubes[c]
+            moved = np.linalg.norm(X.translation() - before[c].translation()) if c in before else 1
+            tilt = np.arccos(min(1.0, np.max(np.abs(X.rotation().matrix()[2, :]))))
+            if moved > STILL or tilt > STRANDED_TILT:
+                return None
+        return unread
 
     def _loose(self, canonical, cubes: Mapping[str, RigidTransform]) -> list[tuple]:
         """The goal's ``on`` facts measured true with the upper cube farther off the lower
@@ -477,6 +534,21 @@ class ClosedLoopExpert:
         dp, dr = self._behind(a, m, tau, lag)
         return dp < TRACK_TOL[0] and dr < TRACK_TOL[1]
 
+    @staticmethod
+    def _stop_after(a: _Action, tau: float) -> float | None:
+        """When the motion next stands still, from ``tau`` on (a settle, the fingers closing
+        or opening), if it does."""
+        stops = [s.t0 for s in a.trajectory.segments if not s.moves and s.t0 > tau - 1e-9]
+        return min(stops, default=None)
+
+    def _arrived(self, a: _Action, m: Measured, tau: float) -> bool:
+        """Whether the hand is where the motion is at ``tau``: within :data:`ARRIVE_TOL`,
+        or still and within :data:`TRACK_TOL` (a hand held off by a cube)."""
+        dp, dr = self._behind(a, m, tau, lag=0)
+        if dp < ARRIVE_TOL[0] and dr < ARRIVE_TOL[1]:
+            return True
+        return self._still and dp < TRACK_TOL[0] and dr < TRACK_TOL[1]
+
     def _answer(self, a: _Action, m: Measured, advance: bool):
         """The action that sends the hand along the motion: the clock moves on when the
         hand is where it was last sent, else the same target is sent again."""
@@ -485,7 +557,13 @@ class ClosedLoopExpert:
         moves = self.execute if self.space == "joint_chunk" else 1
         if advance and self._near(a, m, a.tau):
             start, a.waited = a.tau, 0
-            a.tau = min(a.tau + moves * self.dt, end)
+            target = min(a.tau + moves * self.dt, end)
+            stop = self._stop_after(a, a.tau)
+            if stop is not None and target > stop - 1e-9 and not self._arrived(a, m, stop):
+                target = stop  # the fingers close or open where the hand is, not on its way
+            a.tau = target
+            if target <= start + 1e-9:
+                start, a.waited = a.tau - self.dt, a.waited + 1
         else:
             start, a.waited = a.tau - self.dt, a.waited + 1
         refs = [a.trajectory.at(min(start + k * self.dt, end)) for k in range(1, rows + 1)]
