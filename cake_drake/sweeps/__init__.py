@@ -10,6 +10,7 @@ command; :func:`run_sweep` the library call.
 
 from cake_drake.sweeps.driver import SweepResult, run_sweep
 from cake_drake.sweeps.engines import LocalPool, RayCluster
+from cake_drake.sweeps.pool import spawn_imap
 from cake_drake.sweeps.spec import Sweep, load_sweep, parse_sweep
 from cake_drake.sweeps.table import read_table
 
@@ -22,4 +23,5 @@ __all__ = [
     "parse_sweep",
     "read_table",
     "run_sweep",
+    "spawn_imap",
 ]

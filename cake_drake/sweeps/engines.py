@@ -2,65 +2,34 @@
 
 Both take the same jobs and give the same events; both run
 :func:`cake_drake.sweeps.worker.execute`. An engine yields ``("start", job)`` when a run
-is handed to a worker, ``("queued", job)`` when it goes back to waiting, and
-``("done", job, answer)`` with the worker's answer (or a crashed row when the worker
-died). The engines submit no more runs than they have workers, so "running" means
-running.
+is handed to a worker and ``("done", job, answer)`` with the worker's answer (or a
+crashed row when the worker died). The engines submit no more runs than they have
+workers, so "running" means running. The local pool is
+:mod:`cake_drake.sweeps.pool`, whose :func:`~cake_drake.sweeps.pool.spawn_imap` runs any
+work the same way.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import multiprocessing
 import os
-import signal
 import socket
 from collections import deque
 from collections.abc import Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 
 from cake_drake.errors import InputError
+from cake_drake.sweeps.pool import spawn_events
 from cake_drake.sweeps.worker import crashed_row, execute
 
 Event = tuple
 CRASHED = "the worker process died while running this run (a crash, or it was killed)"
 
 
-def _quiet_worker(parent: int | None = None) -> None:
-    """Workers leave Ctrl-C to the sweep, which stops them itself, and end with it: on
-    Linux the kernel kills a worker whose sweep is gone (even by SIGKILL), and a worker
-    whose sweep was already gone when it started ends at once."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        import ctypes
-
-        PR_SET_PDEATHSIG = 1
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    except (OSError, AttributeError):  # not Linux: the pool's own pipes end it later
-        pass
-    if parent is not None and os.getppid() != parent:
-        os._exit(1)
-
-
-def _stop(pool: ProcessPoolExecutor) -> None:
-    """Stop a pool now: running workers are terminated, queued calls dropped."""
-    terminate = getattr(pool, "terminate_workers", None)  # Python >= 3.14
-    if terminate is not None:
-        terminate()
-        return
-    for process in list((getattr(pool, "_processes", None) or {}).values()):
-        process.terminate()
-    pool.shutdown(wait=False, cancel_futures=True)
-
-
 class LocalPool:
-    """A pool of spawned worker processes on this machine (default: one per core).
-
-    A worker that dies takes the pool down with it, and every run in flight with it;
-    those runs are then tried again one at a time, alone, so that only the run that
-    kills its worker becomes a crashed row.
-    """
+    """A pool of spawned worker processes on this machine (default: one per core), on
+    :func:`cake_drake.sweeps.pool.spawn_events`: a run whose worker dies is a crashed row
+    (that worker alone is replaced; the runs beside it go on), and whatever stops the
+    sweep, the workers are gone within a deadline."""
 
     name = "local pool"
 
@@ -73,58 +42,19 @@ class LocalPool:
         return f"local pool of {self.workers} worker{'s' * (self.workers != 1)}"
 
     def events(self, jobs: Sequence[dict]) -> Iterator[Event]:
-        queue = deque(jobs)
-        while queue:
-            suspects = yield from self._batch(queue, self.workers)
-            for job in suspects:  # alone, so a crash names its own run
-                yield ("start", job)
-                alone = deque([job])
-                again = yield from self._batch(alone, 1)
-                if again:
-                    yield ("done", job, {"row": crashed_row(job, CRASHED), "files": {}})
-
-    def _batch(self, queue: deque, workers: int) -> Iterator[Event]:
-        """Run from ``queue`` on a fresh pool until it is empty (return []) or a worker
-        dies (return the runs that were in flight, for the caller to retry)."""
-        context = multiprocessing.get_context("spawn")
-        pool = ProcessPoolExecutor(
-            workers, mp_context=context, initializer=_quiet_worker, initargs=(os.getpid(),)
-        )
-        running: dict = {}
-
-        def refill():
-            while queue and len(running) < workers:
-                job = queue.popleft()
-                running[pool.submit(execute, job)] = job
-                yield ("start", job)
-
+        events = spawn_events(execute, jobs, self.workers)
         try:
-            while queue or running:
-                yield from refill()
-                finished, _ = wait(running, return_when=FIRST_COMPLETED)
-                broken = False
-                answers = []
-                for future in finished:
-                    try:
-                        answers.append((running[future], future.result()))
-                        del running[future]
-                    except BrokenProcessPool:
-                        broken = True
-                if not broken:
-                    yield from refill()  # the next runs start before the answers are kept
-                for job, answer in answers:
-                    yield ("done", job, answer)
-                if broken:
-                    suspects = list(running.values())
-                    for job in suspects:
-                        yield ("queued", job)
-                    return suspects
-            return []
-        except BaseException:
-            _stop(pool)
-            raise
+            for event in events:
+                kind, job = event[0], event[1]
+                if kind == "died":
+                    yield ("done", job, {"row": crashed_row(job, CRASHED), "files": {}})
+                elif kind == "error":  # execute answers every run: this is the worker's end
+                    why = f"{CRASHED}: {event[2]}"
+                    yield ("done", job, {"row": crashed_row(job, why), "files": {}})
+                else:
+                    yield event
         finally:
-            pool.shutdown(wait=False, cancel_futures=True)
+            events.close()  # the workers gone, within a deadline, however this ends
 
 
 class RayCluster:
