@@ -61,6 +61,40 @@ class IkError(ExecutionError):
     """Inverse kinematics found no joint configuration for a named waypoint."""
 
 
+def quiet_interrupts() -> None:
+    """A command's first act, before its heavy imports (pydrake, the CLI): Ctrl-C or
+    SIGTERM while it starts ends it with the documented line and 130, never a traceback
+    from inside an import. :func:`run_cli` takes over once the command runs.
+
+    Every command gets it without a line of its own: the package's ``__init__``, which
+    runs before any ``python -m cake_drake.<command>`` module and before the
+    ``cake-drake`` console script imports the CLI, calls this when the process was started
+    as one of them (:func:`cake_drake.started_as_command`).
+    """
+    import signal
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, _interrupted_at_start)
+
+
+#: Whether :func:`run_cli` has started a command's main (after it, an interrupt that
+#: reaches :func:`_interrupted_at_start` comes while the interpreter ends).
+_main_started: list[bool] = []
+
+
+def _interrupted_at_start(signum, frame) -> None:
+    """Nothing has been written before a command's main starts: say so, end at once."""
+    import signal
+
+    if not _main_started:
+        how = " by SIGTERM" if signum == signal.SIGTERM else ""
+        try:
+            os.write(2, f"error: interrupted{how}; nothing was written\n".encode())
+        except OSError:  # no standard error: the exit code says it
+            pass
+    os._exit(EXIT_INTERRUPTED)
+
+
 #: The signal that stopped the run, once one has: an interrupt raised inside a Drake
 #: callback can come back out of it as another exception (pybind11 reports a failed
 #: argument conversion as a TypeError), and is an interrupt all the same.
@@ -93,6 +127,7 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     except ValueError:  # not the main thread: leave signals alone
         previous = {}
     _signalled.clear()
+    _main_started[:] = [True]
     given = sys.argv[1:] if argv is None else argv
     show_trace = "--traceback" in given or os.environ.get(TRACEBACK_ENV, "") not in ("", "0")
     try:

@@ -7,6 +7,7 @@ if it were read, expanded or run first and checked after.
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -214,3 +215,101 @@ def test_a_file_where_a_sweep_keeps_a_runs_folder_is_exit_2_up_front(tmp_path):
         run_sweep(sweep, out, LocalPool(1), progress=False)
     kept = {str(p.relative_to(out)) for p in out.rglob("*")}
     assert kept == {".cake_drake-outputs", "runs", f"runs/{run_id}"}  # nothing written
+
+
+#: A planner that will not be told: it ignores SIGTERM and sleeps (a plug-in stuck in
+#: C code, or one that installs its own handler, is the same to the sweep).
+STUBBORN = """
+import pathlib
+import signal
+import time
+
+
+def plan(problem, time_limit):
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    pathlib.Path("stubborn.started").touch()
+    time.sleep(600)
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_sweep_whose_worker_ignores_sigterm_still_ends_on_a_signal(tmp_path, sig):
+    """Workers told, joined with a deadline, then killed: the sweep's end never waits on a
+    worker that does not end when told (nor on a pipe it left half-written)."""
+    (tmp_path / "stubborn.py").write_text(STUBBORN)
+    (tmp_path / "s.yaml").write_text(
+        "scenario:\n  task: {planner: 'stubborn:plan', generate: {blocks: 3}}\n"
+        "  outputs: {render: false}\ngrid:\n  task.generate.seed: [1]\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.sweep", "s.yaml", "--out", "out", "--quiet",
+         "--workers", "1"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(ROOT)])},
+        start_new_session=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 300
+    while not (tmp_path / "stubborn.started").exists():  # the worker is in the plug-in
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "the plug-in never started"
+        time.sleep(0.1)
+    os.killpg(proc.pid, sig)
+    try:
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert err.splitlines() == ["error: interrupted: what finished is kept; --resume runs the rest"]
+
+
+def test_spawn_imap_yields_each_answer_and_names_a_failing_job():
+    from cake_drake.sweeps import spawn_imap
+    from cake_drake.sweeps.pool import WorkerFailed
+
+    assert sorted(spawn_imap(math.sqrt, [1.0, 4.0, 9.0], 2)) == [1.0, 2.0, 3.0]
+    with pytest.raises(WorkerFailed, match="math domain error"):
+        list(spawn_imap(math.sqrt, [4.0, -1.0], 2))
+
+
+def _entry_points() -> list[list[str]]:
+    """Every command: each ``python -m cake_drake.X`` module, and the console script."""
+    found = []
+    for path in sorted((ROOT / "cake_drake").rglob("*.py")):
+        if 'if __name__ == "__main__":' not in path.read_text():
+            continue
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        parts = parts[:-1] if parts[-1] == "__main__" else parts
+        found.append(["-m", ".".join(parts)])
+    script = Path(sys.executable).parent / "cake-drake"
+    if script.is_file():
+        found.append([str(script), "run"])
+    return found
+
+
+@pytest.mark.parametrize("entry", _entry_points(), ids=lambda e: e[-1].rsplit("/", 1)[-1])
+def test_ctrl_c_while_a_command_starts_is_one_line_and_130(tmp_path, entry):
+    """Ctrl-C during a command's imports (before its main runs): stopped at several points
+    of the imports, read from ``-X importtime`` (no clock: each is a point the command has
+    reached), never a KeyboardInterrupt traceback."""
+    for after in (1, 10, 40):  # import lines after the package's own
+        proc = subprocess.Popen(
+            [sys.executable, "-X", "importtime", *entry],
+            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
+        )  # fmt: skip
+        seen = None
+        for line in proc.stderr:
+            if seen is None and line.split("|")[-1].strip() == "cake_drake":
+                seen = 0
+            elif seen is not None and line.startswith("import time:"):
+                seen += 1
+                if seen == after:
+                    proc.send_signal(signal.SIGINT)
+                    break
+        out, err = proc.communicate(timeout=120)
+        err = "\n".join(x for x in err.splitlines() if not x.startswith("import time:"))
+        assert seen == after, f"{entry}: the imports ended before the signal"
+        assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+        assert proc.returncode == 130, (after, err)
+        assert err.strip().splitlines()[-1].startswith("error: interrupted"), err
