@@ -793,10 +793,13 @@ def main_saycan(argv: list[str] | None = None) -> int:
 RECORD_DOC = """Record demonstrations as a LeRobot dataset (v3.0), or check one by replaying it.
 
 SPEC is a scenario: its problem (task.generate: that many blocks, a new problem per
-seed; task.problem: that one), its cameras (the scene and wrist cameras when it names
-none) and, with reference: !Policy, the action space, rate and the demonstrator. The
-demonstrator is the classical cake as a policy (examples.expert_policy:make) unless
---policy or the scenario names another. Seeds are the scenario's seed, +1, +2, ...
+seed; task.problem: that one, its cubes placed per seed by world.placement), its cameras
+(the scene and wrist cameras when it names none; --no-cameras records none, which state
+policies do not need) and, with reference: !Policy, the action space, rate and the
+demonstrator. The demonstrator is the classical cake as a policy unless --policy or the
+scenario names another. Seeds are the scenario's seed, +1, +2, ... Every frame holds
+observation.state, observation.environment_state (the cubes' poses and the goal as
+numbers) and the action; the report keeps the task's training recipe for train.
 
 Each successful episode becomes one episode of the dataset in --out (meta/, data/,
 videos/, lerobot's own writer); report.json lists what was recorded and why the other
@@ -808,9 +811,10 @@ instance; --ray ADDRESS: a cluster); this process keeps each as it finishes, in
 from the same seed and reports how many build the goal again.
 
 Needs lerobot: pip install 'cake_drake[lerobot]'. Exit codes: 0 done; 2 bad input (no
-lerobot, a folder holding another recording without --resume, an action space that
-cannot be recorded); 3 a policy plug-in failed; 4 the dataset could not be written;
-130 interrupted (finished episodes are kept).
+lerobot, a folder holding another recording without --resume, --resume with another
+action space, rate, cameras or task, an action space that cannot be recorded, a dataset
+missing a file); 3 a policy plug-in failed; 4 the dataset could not be written; 130
+interrupted (finished episodes are kept).
 """
 
 
@@ -825,6 +829,11 @@ def record_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, help="the dataset's folder")
     p.add_argument("--episodes", type=int, default=10, help="episodes to try (default 10)")
     p.add_argument("--policy", help="the demonstrator: module:attribute of a policy factory")
+    p.add_argument(
+        "--no-cameras",
+        action="store_true",
+        help="record no images: joints, environment state and actions (for state policies)",
+    )
     p.add_argument("--workers", type=int, help="worker processes (default: cores)")
     _ray_flag(p)
     p.add_argument("--resume", action="store_true", help="continue an interrupted recording")
@@ -858,6 +867,8 @@ def _workers(n: int | None) -> int:
 
 
 def main_record(argv: list[str] | None = None) -> int:
+    from dataclasses import replace
+
     from cake_drake.learning import dataset
     from cake_drake.learning.recording import record, replay_check, spec_from_scenario
     from cake_drake.scenario import load_scenario
@@ -878,6 +889,8 @@ def main_record(argv: list[str] | None = None) -> int:
         raise InputError(f"--episodes {args.episodes}: from 1 to 100000")
     scenario = load_scenario(args.spec, args.name)
     spec = spec_from_scenario(scenario, args.policy)
+    if args.no_cameras:
+        spec = replace(spec, cameras=())
     seeds = [scenario.seed + k for k in range(args.episodes)]
     from dataclasses import asdict
 

@@ -142,7 +142,9 @@ def _add_reference(
     """The one place that tells a planned reference, a recorded one and a policy apart."""
     ref = scenario.reference
     if isinstance(ref, Policy):
-        return _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, policy)
+        return _add_policy(
+            builder, scenario, scene, problem, q_start, slots, cameras, policy, len(actions)
+        )
     if isinstance(ref, Recorded):
         replay = ReferenceTrajectory.from_npz(resolve_path(ref.path), ref.differentiate)
         system = builder.AddNamedSystem("reference", replay.make_source())
@@ -227,11 +229,13 @@ def _world_indices(scene: Scene, slots) -> WorldIndices:
     )
 
 
-def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, policy):
-    """A policy in place of the action source and WaypointIk (the learned layer's slot)."""
+def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, policy, n_actions):
+    """A policy in place of the action source and WaypointIk (the learned layer's slot);
+    its step budget scaled to the plan's ``n_actions`` unless the scenario sets one."""
     from cake_drake.geometric.ik import DlsIk
     from cake_drake.plugins import guarded
     from cake_drake.policy.observations import goal_facts, instruction
+    from cake_drake.policy.spaces import step_budget
     from cake_drake.systems.policy_source import PolicyTask, make_policy, policy_of
 
     ref = scenario.reference
@@ -263,7 +267,7 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
             ref.action_space,
             ref.options,
             ref.rate_hz,
-            ref.max_steps,
+            step_budget(ref.max_steps, n_actions, ref.rate_hz),  # in control periods
             _world_indices(scene, slots),
             DlsIk(kinematics, max_iterations=50),  # a step is small: Newton from the last
             (kinematics.lower, kinematics.upper),

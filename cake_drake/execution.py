@@ -89,6 +89,8 @@ class Execution:
     q_final: np.ndarray  # arm joints at the end
     fingers_final: float  # opening of one finger at the end (m)
     actions: tuple[str, ...] = ()  # the actions executed, in order
+    #: Why a policy stopped acting when not by its own word ("the policy's step budget ...").
+    ended: str | None = None
     monitoring: dict = field(default_factory=dict)  # the monitor's events, replans, checks
     frames: dict = field(default_factory=dict)  # each camera's last image (name -> array)
 
@@ -247,6 +249,7 @@ def execute(
         q_final=cake.scene.plant.GetPositions(plant_context, cake.scene.arm).copy(),
         fingers_final=fingers,
         actions=cake.reference.executed(context),
+        ended=getattr(cake.reference.policy, "ended", None),
         monitoring=cake.reference.monitoring(context),
         frames=grab(cake.cameras, cake.scenario.cameras, context) if cake.cameras else {},
     )

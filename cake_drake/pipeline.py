@@ -308,7 +308,7 @@ def check_policy(ref: Policy) -> None:
         resolve(ref.factory, {}, "policy")
     check_space(ref.action_space, ref.options)
     _range(ref.rate_hz, 0.5, 100.0, "reference.rate_hz", " Hz")
-    _range(ref.max_steps, 1, 1_000_000, "reference.max_steps")
+    _range(ref.max_steps, 0, 1_000_000, "reference.max_steps")
 
 
 #: Every file a run may write to its output folder.
@@ -463,7 +463,7 @@ def verdict(problem: Problem, execution: Execution) -> tuple[bool, list[str], st
         if off > STACK_TOL and any(g[0] == "on" and g[1] == b for g in view.goal)
     ]
     if unmet or loose:
-        parts = []
+        parts = [execution.ended] if execution.ended else []
         if unmet:
             parts.append("goal facts not true in the simulated world: " + " ".join(unmet))
         if loose:

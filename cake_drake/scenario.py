@@ -127,12 +127,14 @@ class Policy:
     ``act(observation) -> action`` (or ``(action, done)``), asked ``rate_hz`` times a
     simulated second; its action, in ``action_space`` (:mod:`cake_drake.policy.spaces`),
     is held until the next step. The run ends when the policy says done, or after
-    ``max_steps`` steps; the verdict is measured from the poses, as for any run."""
+    ``max_steps`` steps (0: scaled to the task, 20 s plus 8 s per action of the classical
+    plan); the verdict is measured from the poses, as for any run, and says when the
+    budget ran out."""
 
     factory: str = ""
     action_space: str = "joint_position"  # joint_position | ee_delta | joint_chunk
     rate_hz: float = 10.0
-    max_steps: int = 1000
+    max_steps: int = 0  # 0: scaled to the task's plan
     options: dict[str, float] = field(default_factory=dict)
     #: A trained policy instead of a factory: a folder written by ``python -m
     #: cake_drake.train`` (or any LeRobot checkpoint folder), run through its processors.

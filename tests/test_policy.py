@@ -108,6 +108,22 @@ def raises():
 
 def strings():
     return Bad(lambda o: "move left")
+
+
+def one_tuple():
+    return Bad(lambda o: (np.zeros(7),))
+
+
+def three_tuple():
+    return Bad(lambda o: (np.zeros(7), False, 1))
+
+
+def maybe_done():
+    return Bad(lambda o: (np.zeros(7), "maybe"))
+
+
+def a_dict():
+    return Bad(lambda o: {"dx": 0.0})
 """
 
 
@@ -118,6 +134,10 @@ def strings():
         ("bad:nan", "returned a non-finite ee_delta action"),
         ("bad:raises", "raised RuntimeError: the network is not loaded"),
         ("bad:strings", "returned str 'move left'"),
+        ("bad:one_tuple", "returned a tuple of 1; act() returns an action, or (action, done)"),
+        ("bad:three_tuple", "returned a tuple of 3"),
+        ("bad:maybe_done", "returned done = 'maybe' (str); done is a bool"),
+        ("bad:a_dict", "returned dict {'dx': 0.0}"),
     ],
 )
 def test_a_bad_policy_is_one_line_and_exit_3(tmp_path, factory, words):
@@ -147,12 +167,51 @@ def test_a_bad_policy_is_one_line_and_exit_3(tmp_path, factory, words):
          "reference.rate_hz = 0.0 is outside"),
         ("reference: !Policy {factory: examples.expert_policy:make, action_space: joint_chunk,"
          " options: {horizon: 4, execute: 9}}", "1 <= execute <= horizon"),
+        ("reference: !Policy {factory: examples.expert_policy:make, action_space: joint_chunk,"
+         " options: {horizon: 2.5}}", "horizon = 2.5: a whole number"),
+        ("reference: !Policy {factory: examples.expert_policy:make, action_space: joint_chunk,"
+         " options: {horizon: 1000000000}}", "from 1 to 100"),
     ],
 )  # fmt: skip
 def test_a_policy_that_cannot_run_is_refused_before_anything_is_built(text, words):
     s = parse_scenario(text + "\n", "s.yaml")
     with pytest.raises(InputError, match=words.replace("(", r"\(")):
         check(s, write=False)
+
+
+@pytest.mark.parametrize(
+    "command",
+    ["record", "evaluate"],
+)
+@pytest.mark.parametrize(
+    "factory, words",
+    [
+        ("bad:one_tuple", "returned a tuple of 1"),
+        ("bad:maybe_done", "returned done = 'maybe' (str)"),
+        ("bad:a_dict", "returned dict {'dx': 0.0}"),
+        ("bad:wrong_shape", "returned an action of shape (3,)"),
+    ],
+)
+def test_a_bad_answer_names_the_users_policy_in_record_and_evaluate(
+    tmp_path, command, factory, words
+):
+    (tmp_path / "bad.py").write_text(BAD)
+    (tmp_path / "s.yaml").write_text(
+        "task: {generate: {blocks: 2}}\n"
+        "reference: !Policy {factory: bad:wrong_shape, action_space: ee_delta, max_steps: 5}\n"
+    )
+    args = ["--out", "o", "--episodes", "1", "--workers", "1"]
+    args = ["s.yaml", "--policy", factory, *args] if command == "record" else [factory,
+            "--suite", "s.yaml", *args]  # fmt: skip
+    r = subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{command}", *args],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
+    )  # fmt: skip
+    assert r.returncode == 3, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert f"policy '{factory}'" in r.stderr and words in r.stderr, r.stderr
+    assert "HeldAction" not in r.stderr
 
 
 # --- Gymnasium -------------------------------------------------------------------------------

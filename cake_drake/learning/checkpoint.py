@@ -12,6 +12,8 @@ and the Gym env (``make(path=DIR)`` as any policy plug-in).
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 from pathlib import Path
@@ -114,7 +116,8 @@ class CheckpointPolicy:
 
         config = PreTrainedConfig.from_pretrained(self.folder)
         config.device = self.device
-        policy = get_policy_class(config.type).from_pretrained(self.folder, config=config)
+        with contextlib.redirect_stdout(io.StringIO()):  # lerobot prints where it loads from
+            policy = get_policy_class(config.type).from_pretrained(self.folder, config=config)
         policy.to(self.device).eval()
         self._pre, self._post = make_pre_post_processors(
             config,

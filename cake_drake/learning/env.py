@@ -24,7 +24,8 @@ simulated seconds) and returns what the policy slot observes.
   ``is_success`` (every goal fact true, every stacked cube within 5 mm of the one below),
   the English instruction ``task`` and the ``goal`` facts.
 - ``terminated`` on success, or when a cube has left the table (the world cannot be
-  recovered); ``truncated`` after ``max_steps`` steps.
+  recovered); ``truncated`` after ``max_steps`` steps (0, the default: scaled to the
+  task, 20 s plus 8 s per action of the classical plan; ``env.unwrapped.budget``).
 - the observation is the policy slot's own, computed once per control period: each
   camera renders once a step.
 
@@ -123,7 +124,7 @@ class StackEnv(gymnasium.Env):
         control_mode: str = "ee_delta",
         cameras: list[Camera] | None = None,
         rate_hz: float = 10.0,
-        max_steps: int = 1200,
+        max_steps: int = 0,
         time_step: float = 0.01,
         options: dict | None = None,
         render_mode: str | None = None,
@@ -142,7 +143,13 @@ class StackEnv(gymnasium.Env):
         self.blocks, self.problem = _blocks(blocks), problem
         self.obs_mode, self.control_mode = obs_mode, control_mode
         self.cameras = _cameras(cameras) if "rgb" in obs_mode else []
-        self.rate_hz, self.max_steps, self.time_step = rate_hz, max_steps, time_step
+        whole = isinstance(max_steps, int | np.integer) and not isinstance(max_steps, bool)
+        if not (whole and 0 <= max_steps <= 1_000_000):
+            raise InputError(
+                f"max_steps = {max_steps!r:.24}: a whole number of steps from 0 (scaled to "
+                "the task) to 1000000"
+            )
+        self.rate_hz, self.max_steps, self.time_step = rate_hz, int(max_steps), time_step
         self.placement = placement
         self.render_mode = render_mode
         # The same check a scenario gets, before make() returns: field names as a scenario's.
@@ -184,7 +191,7 @@ class StackEnv(gymnasium.Env):
             factory="cake_drake.learning.env:HeldAction",
             action_space=self.control_mode,
             rate_hz=self.rate_hz,
-            max_steps=self.max_steps,
+            max_steps=1_000_000,  # the environment keeps the budget (``step``)
             options=self.options,
         )
         s.world.time_step = self.time_step
@@ -229,6 +236,10 @@ class StackEnv(gymnasium.Env):
         self._context = self._simulator.get_context()
         self._source_context = self._source.GetMyContextFromRoot(self._context)
         self._steps = 0
+        #: This episode's step budget: ``max_steps``, or (0) scaled to the classical plan.
+        self.budget = spaces.step_budget(
+            self.max_steps, len(plan.actions), self.rate_hz, self._periods
+        )
         return self._observe()
 
     def step(self, action):
@@ -239,7 +250,7 @@ class StackEnv(gymnasium.Env):
         self._steps += 1
         obs, info = self._observe()
         terminated = info["is_success"] or info["unrecoverable"]
-        truncated = not terminated and self._steps >= self.max_steps
+        truncated = not terminated and self._steps >= self.budget
         return obs, info["reward"], terminated, truncated, info
 
     def render(self):

@@ -47,7 +47,7 @@ def evaluate(
         k = sum(r["success"] for r in sub)
         sizes[str(n)] = {"episodes": len(sub), "success": k, "ci95": list(wilson(k, len(sub)))}
     summary = {
-        "policy": spec.policy,
+        "policy": spec.label,
         "control_mode": spec.control_mode,
         "episodes": len(rows),
         "success": wins,

@@ -36,7 +36,7 @@ class EpisodeSpec:
     problem: str | None = None
     control_mode: str = "joint_position"
     rate_hz: float = 10.0
-    max_steps: int = 1200
+    max_steps: int = 0  # 0: scaled to the task's plan (policy.spaces.step_budget)
     cameras: tuple = ()  # cake_drake.world.cameras.Camera, none: state only
     policy: str = EXPERT
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
@@ -56,6 +56,11 @@ class EpisodeSpec:
             options=self.action_options(),
             placement=self.placement,
         )
+
+    @property
+    def label(self) -> str:
+        """The policy as its messages and tables name it: its factory, or its checkpoint."""
+        return str(self.options.get("path") or self.policy)
 
     def action_options(self) -> dict:
         """The action space's own options (a chunk's ``horizon`` and ``execute``)."""
@@ -89,12 +94,6 @@ def _make_policy(spec: str, options: dict):
     return make_policy(spec, options)
 
 
-def budget_text(max_steps: int, rate_hz: float, periods: int = 1) -> str:
-    """How a step budget that ran out is named: its steps and its simulated seconds."""
-    return (
-        f"the policy's step budget of {max_steps} ({max_steps * periods / rate_hz:.1f} s) ran out"
-    )
-
 
 def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
     """Run the policy ``spec.policy`` for one episode of ``spec.env()`` reset with ``seed``."""
@@ -105,7 +104,7 @@ def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
     policy = _make_policy(spec.policy, spec.options)
-    label = f"policy {spec.policy!r}"
+    label = f"policy {spec.label!r}"
     guarded(label, policy.reset, env.unwrapped.policy_task, seed, exit_code=DURING)
     kin = Kinematics()
     options, counts = spec.action_options(), spaces.Counts()
@@ -136,9 +135,8 @@ def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
     elif terminated:
         reason = "a cube left the table"
     elif truncated:
-        reason = budget_text(
-            spec.max_steps, spec.rate_hz, spaces.periods(spec.control_mode, options)
-        )
+        periods = spaces.periods(spec.control_mode, options)
+        reason = spaces.budget_text(env.unwrapped.budget, spec.rate_hz, periods)
     elif getattr(policy, "reason", None):  # a policy that says why it stopped
         reason = f"the policy said done: {policy.reason}"
     ep = Episode(

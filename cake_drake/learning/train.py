@@ -89,6 +89,7 @@ def check(
     from cake_drake.learning.checkpoint import device_for
 
     root, out = Path(root), Path(out)
+    device_for(device)
     if not root.is_dir():
         raise InputError(f"{root}: no such dataset folder")
     gone = datasets.missing_files(root)
@@ -107,7 +108,6 @@ def check(
             f"training.n_action_steps {recipe.n_action_steps}: 1 to chunk_size "
             f"({recipe.chunk_size})"
         )
-    device_for(device)
     keys = input_keys(_features(root), recipe.inputs, root)
     last = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
     if resume and not last.is_file():
@@ -192,7 +192,8 @@ def train(
     where = device_for(device)
     if resume:
         config = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
-        with _argv([f"--config_path={config}", "--resume=true", f"--steps={recipe.steps}"]):
+        steps = f"--steps={recipe.steps}", f"--save_freq={recipe.steps}", f"--output_dir={out}"
+        with _argv([f"--config_path={config}", "--resume=true", *steps]):
             lerobot_train()
     else:
         meta = LeRobotDatasetMetadata(repo_id, root=root)

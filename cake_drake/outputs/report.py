@@ -138,6 +138,8 @@ def _policy(source) -> dict | None:
         "clipped": c.clipped,
         "unreachable": c.unreachable,
         "said_done": source.done and c.steps < source.max_steps,
+        "max_steps": source.max_steps,
+        "ended": source.ended,
     }
 
 

@@ -82,6 +82,27 @@ def periods(name: str, options: dict) -> int:
     return int(options.get("execute", options.get("horizon", 10)))
 
 
+#: A step budget of 0 is scaled to the task: this much simulated time per planned action,
+#: plus a fixed allowance (s). At 10 Hz a 12-block problem's ~30 actions get 260 s.
+BUDGET_PER_ACTION_S = 8.0
+BUDGET_BASE_S = 20.0
+
+
+def step_budget(max_steps: int, n_actions: int, rate_hz: float, periods: int = 1) -> int:
+    """The policy's step budget: ``max_steps``, or (0) scaled to the classical plan's
+    length, ``BUDGET_BASE_S + BUDGET_PER_ACTION_S`` per action, in steps at ``rate_hz``."""
+    if max_steps:
+        return int(max_steps)
+    seconds = BUDGET_BASE_S + BUDGET_PER_ACTION_S * max(n_actions, 1)
+    return max(1, int(np.ceil(seconds * rate_hz / periods)))
+
+
+def budget_text(max_steps: int, rate_hz: float, periods: int = 1) -> str:
+    """How a step budget that ran out is named: its steps and its simulated seconds."""
+    seconds = max_steps * periods / rate_hz
+    return f"the policy's step budget of {max_steps} ({seconds:.1f} s) ran out"
+
+
 def read_answer(answer, label: str) -> tuple[object, bool]:
     """A policy's answer to ``act`` as (action, done): an action, ``(action, done)`` or
     ``(None, True)``; ``done`` a bool. Anything else is one line naming the policy."""

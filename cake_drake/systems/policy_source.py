@@ -95,6 +95,9 @@ class PolicySource(LeafSystem):
         self.task = task
         self.counts = spaces.Counts()
         self.done = False
+        #: Why the policy stopped acting when it was not its own word (its budget ran out).
+        self.ended: str | None = None
+        self.period_s = 1.0 / rate_hz
         self.steps = 0
         self.last_action: np.ndarray | None = None
         self._chunk: deque = deque()
@@ -173,6 +176,7 @@ class PolicySource(LeafSystem):
             return
         if self.steps >= self.max_steps:
             self.done = True
+            self.ended = spaces.budget_text(self.max_steps, 1.0 / self.period_s)
             return
         if not self._chunk:
             obs = self.observe(context)

@@ -1,0 +1,370 @@
+"""The slot filled: learning tasks, what a learner reads, LeRobot's own training loop, and a
+trained checkpoint acting through evaluate, a run and the Gym env.
+
+Everything is real: Drake, lerobot's writer, loader and trainer (a few steps), torch.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+
+from cake_drake.errors import InputError
+from cake_drake.pipeline import check, plan_and_layout
+from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, MAX_CUBES, goal_table
+from cake_drake.scenario import load_scenario
+from cake_drake.world.scene import Placement
+
+ROOT = Path(__file__).resolve().parent.parent
+LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
+ENV_ID = "cake_drake.gym:CakeDrake/Stack-v0"
+
+
+def cake(command: str, *args: str, cwd: Path = ROOT, timeout: float = 900):
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    return subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{command}", *args],
+        cwd=cwd, capture_output=True, text=True, timeout=timeout, env=env,
+    )  # fmt: skip
+
+
+def one_line(r, code: int, *words: str) -> None:
+    assert r.returncode == code, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    for w in words:
+        assert w in r.stderr, r.stderr
+
+
+# --- tasks a learner can generalise over -----------------------------------------------------
+
+
+def layout_for(name: str, seed: int):
+    s = load_scenario(LEARNING, name)
+    s.seed = seed
+    _, _, initial = plan_and_layout(check(s, write=False))
+    return s, initial
+
+
+@pytest.mark.parametrize("name", ["stack2", "tower3", "tower5"])
+def test_placement_is_seeded_bounded_and_never_overlapping(name):
+    s, first = layout_for(name, 3)
+    _, again = layout_for(name, 3)
+    _, other = layout_for(name, 4)
+    nominal = load_scenario(LEARNING, name)
+    nominal.world.placement = Placement()
+    _, fixed = plan_and_layout(check(nominal, write=False))[1:]
+    for cube, X in first.items():
+        assert np.array_equal(X.GetAsMatrix4(), again[cube].GetAsMatrix4())  # same seed
+        shift = X.translation() - fixed[cube].translation()
+        assert np.all(np.abs(shift[:2]) <= s.world.placement.xy + 1e-12) and shift[2] == 0
+        turn = X.rotation().multiply(fixed[cube].rotation().inverse()).ToAngleAxis()
+        assert abs(turn.angle()) <= np.radians(s.world.placement.yaw_deg) + 1e-9
+    assert any(
+        not np.allclose(first[c].translation(), other[c].translation()) for c in first
+    )  # another seed, another world
+    bases = {tuple(np.round(X.translation()[:2], 9)) for X in first.values()}
+    centres = [np.array(b) for b in bases]
+    for i in range(len(centres)):
+        for j in range(i):
+            assert np.linalg.norm(centres[i] - centres[j]) >= s.world.slot_spacing - 1e-9
+
+
+def test_placement_out_of_bounds_is_refused_with_its_field():
+    s = load_scenario(LEARNING, "stack2")
+    s.world.placement.xy = 0.2
+    with pytest.raises(InputError, match=r"world.placement.xy = 0.2 is outside 0 to 0.03"):
+        check(s, write=False)
+
+
+def test_the_learning_tasks_have_equal_cameras_and_a_recipe():
+    for name in ("stack2", "tower3", "tower5", "blocks3"):
+        s = load_scenario(LEARNING, name)
+        assert len({(c.width, c.height) for c in s.cameras}) == 1, name
+        assert s.training.policy in ("act", "diffusion") and s.training.steps > 0
+
+
+# --- what a learner reads ------------------------------------------------------------------
+
+
+def test_environment_state_holds_the_cubes_and_the_goal_as_numbers():
+    env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
+                         control_mode="joint_position", placement=(0.025, 30.0))  # fmt: skip
+    obs, info = env.reset(seed=5)
+    e = obs["environment_state"]
+    assert e.shape == (ENVIRONMENT_STATE_SIZE,) and e.dtype == np.float32
+    poses = e[: MAX_CUBES * 7].reshape(MAX_CUBES, 7)
+    assert np.array_equal(poses[:2], obs["cubes"][:2]) and not poses[2:].any()
+    goal = e[MAX_CUBES * 7 :].reshape(MAX_CUBES, MAX_CUBES + 1)
+    assert goal[0, 1] == 1 and goal[1, MAX_CUBES] == 1 and goal.sum() == 2  # a on b, b on table
+    other = goal_table(("a", "b"), {("on", "b", "a"), ("on-table", "a")})
+    assert not np.array_equal(other, goal)  # a different goal changes the numbers
+
+
+def test_the_observation_is_computed_once_a_period(monkeypatch):
+    """The env reads the slot's observation, and the slot's update at the same time gets
+    the same one: one observation (one frame per camera) a step, not two."""
+    from cake_drake.systems import policy_source
+
+    made = []
+
+    class Counted(policy_source.Observation):
+        def __init__(self, values, images):
+            made.append(values["time"])
+            renders = {k: (lambda f=f, k=k: made.append(k) or f()) for k, f in images.items()}
+            super().__init__(values, renders)
+
+    monkeypatch.setattr(policy_source, "Observation", Counted)
+    env = gymnasium.make(ENV_ID, blocks=3, control_mode="joint_position", obs_mode="state+rgb",
+                         cameras=[{"name": "scene", "width": 32, "height": 32}])  # fmt: skip
+    obs, _ = env.reset(seed=1)
+    for _ in range(5):
+        obs, *_ = env.step(obs["state"][:8])
+    times = [m for m in made if not isinstance(m, str)]
+    frames = [m for m in made if isinstance(m, str)]
+    assert len(times) == 6 and len(set(times)) == 6  # reset + 5 steps, each time once
+    assert frames == ["observation.images.scene"] * 6  # one frame a step
+
+
+def test_a_policy_that_reads_no_image_costs_no_frame():
+    from cake_drake.policy.observations import Observation
+
+    rendered = []
+    obs = Observation({"x": 1}, {"observation.images.scene": lambda: rendered.append(1) or 7})
+    assert obs["x"] == 1 and "observation.images.scene" in obs and rendered == []
+    assert obs["observation.images.scene"] == 7 and obs["observation.images.scene"] == 7
+    assert rendered == [1] and dict(obs) == {"x": 1, "observation.images.scene": 7}
+
+
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"blocks": "x"}, "blocks = 'x': a number of cubes"),
+        ({"blocks": 2.5}, "blocks = 2.5: a number of cubes"),
+        ({"blocks": (3, 40)}, "whole numbers from 1 to 12"),
+        ({"cameras": [{"nam": "scene"}], "obs_mode": "rgb"}, "cameras[0]: unknown field 'nam'"),
+        ({"cameras": ["scene"], "obs_mode": "rgb"}, "cameras[0] = 'scene': a Camera"),
+        ({"control_mode": "joint_chunk", "options": {"horizon": 2.5}}, "horizon = 2.5: a whole"),
+        ({"control_mode": "joint_chunk", "options": {"horizon": "ten"}}, "horizon = 'ten'"),
+        ({"control_mode": "joint_chunk", "options": {"horizon": 10**9}}, "from 1 to 100"),
+        ({"rate_hz": 0}, "reference.rate_hz = 0 is outside"),
+        ({"time_step": 5}, "world.time_step = 5 is outside"),
+        ({"max_steps": -1}, "max_steps = -1: a whole number"),
+        ({"placement": (0.5, 0)}, "world.placement.xy = 0.5 is outside"),
+    ],
+)
+def test_the_environments_arguments_are_checked_at_make(kwargs, words):
+    with pytest.raises(InputError) as e:
+        gymnasium.make(ENV_ID, **kwargs)
+    assert words in str(e.value) and "\n" not in str(e.value)
+
+
+def test_a_camera_given_as_a_mapping_is_read_as_one():
+    env = gymnasium.make(ENV_ID, blocks=2, obs_mode="rgb",
+                         cameras=[{"name": "scene", "width": 32, "height": 24}])  # fmt: skip
+    obs, _ = env.reset(seed=0)
+    assert obs["images"]["scene"].shape == (24, 32, 3)
+
+
+# --- recording, training, a checkpoint acting ----------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """stack2: three episodes recorded (no cameras), then a few training steps."""
+    folder = tmp_path_factory.mktemp("learning")
+    r = cake("record", str(LEARNING), "--name", "stack2", "--out", str(folder / "ds"),
+             "--episodes", "3", "--workers", "1", "--no-cameras")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    r = cake("train", str(folder / "ds"), "--out", str(folder / "run"), "--steps", "3",
+             "--batch-size", "4", "--device", "cpu")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    return folder
+
+
+@pytest.mark.slow
+def test_a_recording_has_environment_state_and_lerobot_loads_it(trained):
+    from cake_drake.learning.dataset import read
+
+    data = read(trained / "ds")
+    frame = data[0]
+    assert tuple(frame["observation.environment_state"].shape) == (ENVIRONMENT_STATE_SIZE,)
+    report = json.loads((trained / "ds" / "report.json").read_text())
+    assert report["task"] == "stack2" and report["training"]["policy"] == "act"
+
+
+@pytest.mark.slow
+def test_train_writes_a_lerobot_checkpoint_with_the_tasks_recipe(trained):
+    model = trained / "run" / "checkpoints" / "last" / "pretrained_model"
+    config = json.loads((model / "config.json").read_text())
+    assert config["type"] == "act" and config["dim_model"] == 128  # the recipe's size
+    assert set(config["input_features"]) == {
+        "observation.state",
+        "observation.environment_state",
+    }
+    assert (model / "model.safetensors").stat().st_size < 5_000_000
+
+
+@pytest.mark.slow
+def test_train_resumes_its_last_checkpoint(trained, tmp_path):
+    run = tmp_path / "run"
+    shutil.copytree(trained / "run", run, symlinks=True)
+    r = cake("train", str(trained / "ds"), "--out", str(run), "--steps", "5", "--resume",
+             "--batch-size", "4", "--device", "cpu")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    state = run / "checkpoints" / "last" / "training_state" / "training_step.json"
+    assert json.loads(state.read_text())["step"] == 5
+
+
+@pytest.mark.slow
+def test_a_checkpoint_acts_in_evaluate_a_run_and_the_gym_env(trained, tmp_path):
+    r = cake("evaluate", str(trained / "run"), "--suite", str(LEARNING), "--name", "stack2",
+             "--episodes", "1", "--seed", "1000", "--workers", "1", "--out",
+             str(tmp_path / "ev"))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
+    assert summary["episodes"] == 1 and summary["policy"] == str((trained / "run").resolve())
+    (tmp_path / "s.yaml").write_text(
+        f'task: {{problem: "package://cake_drake/pddl/stack2.pddl"}}\n'
+        f"reference: !Policy {{checkpoint: {trained / 'run'}, max_steps: 15}}\n"
+        "outputs: {render: false}\n"
+    )
+    r = cake("run", "--scenario", "s.yaml", "--out", "out", cwd=tmp_path)
+    assert r.returncode == 3 and "the policy's step budget of 15 (1.5 s) ran out" in r.stderr
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["policy"]["steps"] == 15 and "ran out" in summary["policy"]["ended"]
+    from cake_drake.learning.checkpoint import make
+
+    env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
+                         control_mode="joint_position")  # fmt: skip
+    policy = make(str(trained / "run"), "cpu")
+    obs, _ = env.reset(seed=2)
+    policy.reset(env.unwrapped.policy_task, 2)
+    for _ in range(4):
+        action = policy.act(obs)
+        assert action.shape == (8,) and np.all(np.isfinite(action))
+        obs, *_ = env.step(action)
+
+
+@pytest.mark.slow
+def test_plain_lerobot_train_trains_on_a_recording(trained, tmp_path):
+    exe = Path(sys.executable).parent / "lerobot-train"
+    r = subprocess.run(
+        [str(exe), "--dataset.repo_id=cake_drake/stack2", f"--dataset.root={trained / 'ds'}",
+         "--dataset.video_backend=pyav", "--policy.type=act",
+         "--policy.pretrained_backbone_weights=null", "--policy.push_to_hub=false",
+         "--policy.device=cpu", "--policy.dim_model=64", "--policy.dim_feedforward=128",
+         "--steps=2", "--batch_size=2", "--num_workers=0", f"--output_dir={tmp_path / 'o'}"],
+        capture_output=True, text=True, timeout=600, env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "o" / "checkpoints" / "last" / "pretrained_model" / "config.json").is_file()
+
+
+# --- bad input: one line, exit 2 -------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_a_dataset_without_the_features_a_policy_needs_is_refused(trained, tmp_path):
+    ds = tmp_path / "ds"
+    shutil.copytree(trained / "ds", ds)
+    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "images")
+    one_line(r, 2, "no camera features, which --inputs images needs")
+    info = json.loads((ds / "meta" / "info.json").read_text())
+    del info["features"]["observation.environment_state"]
+    (ds / "meta" / "info.json").write_text(json.dumps(info))
+    r = cake("train", str(ds), "--out", str(tmp_path / "o"))
+    one_line(r, 2, "no observation.environment_state")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_a_checkpoint_that_does_not_fit_is_refused_before_any_episode(trained, tmp_path):
+    r = cake("evaluate", str(tmp_path), "--suite", str(LEARNING), "--name", "stack2",
+             "--out", str(tmp_path / "ev"))  # fmt: skip
+    one_line(r, 2, "not a LeRobot checkpoint")
+    (tmp_path / "ee.yaml").write_text(
+        "task: {problem: package://cake_drake/pddl/stack2.pddl}\n"
+        "reference: !Policy {factory: 'examples.expert_policy:make', action_space: ee_delta}\n"
+    )
+    r = cake("evaluate", str(trained / "run"), "--suite", str(tmp_path / "ee.yaml"),
+             "--out", str(tmp_path / "ev2"))  # fmt: skip
+    one_line(r, 2, "predicts 8 numbers an action; ee_delta takes 7")
+    assert not (tmp_path / "ev").exists() and not (tmp_path / "ev2").exists()
+
+
+def test_cuda_without_a_gpu_is_refused(tmp_path):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    (tmp_path / "ds" / "meta").mkdir(parents=True)
+    r = cake("train", str(tmp_path / "ds"), "--out", str(tmp_path / "o"), "--device", "cuda")
+    one_line(r, 2, "device cuda: torch sees no CUDA GPU here")
+    from cake_drake.learning.checkpoint import device_for
+
+    with pytest.raises(InputError, match="device cuda: torch sees no CUDA GPU"):
+        device_for("cuda")
+
+
+# --- record / replay / resume: a dataset is read from its folder alone ------------------------
+
+
+@pytest.mark.slow
+def test_replay_of_a_dataset_missing_its_data_file_names_the_file(trained, tmp_path):
+    ds = tmp_path / "ds"
+    shutil.copytree(trained / "ds", ds)
+    data = next((ds / "data").rglob("*.parquet"))
+    data.unlink()
+    r = cake("record", "--replay", str(ds), "--workers", "1")
+    one_line(r, 2, str(data.relative_to(ds)), "missing from the dataset")
+    assert "huggingface" not in r.stderr
+
+
+@pytest.mark.slow
+def test_resume_reruns_an_episode_whose_verdict_was_cut_short(trained, tmp_path):
+    ds = tmp_path / "ds"
+    shutil.copytree(trained / "ds", ds)
+    (ds / "episodes" / "ep_0.json").write_text("")  # what a crash mid-write once left
+    r = cake("record", str(LEARNING), "--name", "stack2", "--out", str(ds), "--episodes", "3",
+             "--workers", "1", "--no-cameras", "--resume")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert json.loads((ds / "episodes" / "ep_0.json").read_text())["seed"] == 0
+    assert not list((ds / "episodes").glob(".ep_*"))  # nothing half-written left
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--name", "stack2"], "--resume with another cameras"),  # the recording had none
+        (["--name", "tower3", "--no-cameras"], "--resume with another problem"),
+    ],
+)
+def test_resume_with_another_scenario_is_refused_naming_what_differs(
+    trained, tmp_path, args, words
+):
+    ds = tmp_path / "ds"
+    shutil.copytree(trained / "ds", ds)
+    before = sorted(p.name for p in ds.rglob("*"))
+    r = cake("record", str(LEARNING), *args, "--out", str(ds), "--episodes", "4", "--resume")
+    one_line(r, 2, words)
+    assert sorted(p.name for p in ds.rglob("*")) == before
+
+
+@pytest.mark.slow
+def test_resume_with_another_action_space_is_refused(trained, tmp_path):
+    ds = tmp_path / "ds"
+    shutil.copytree(trained / "ds", ds)
+    text = LEARNING.read_text().replace("action_space: joint_position", "action_space: ee_delta")
+    (tmp_path / "ee.yaml").write_text(text.replace('"package://', '"' + "package://"))
+    r = cake("record", str(tmp_path / "ee.yaml"), "--name", "stack2", "--out", str(ds),
+             "--episodes", "4", "--resume", "--no-cameras")  # fmt: skip
+    one_line(r, 2, "--resume with another control_mode", "'joint_position'", "'ee_delta'")
