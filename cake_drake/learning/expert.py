@@ -257,7 +257,16 @@ class ClosedLoopExpert:
         self.kernels = kernels(self.problem, actions)
 
     def act(self, observation: Mapping):
-        """One step: read the world, keep or mend the plan, answer from where the hand is."""
+        """One step: read the world, keep or mend the plan, answer from where the hand is.
+
+        An action, or ``(None, True)`` when the episode is over for the expert: then
+        :attr:`reason` says why (``"goal reached"``, or what leaves it without a plan)."""
+        try:
+            return self._act(observation)
+        except CakeDrakeError as e:  # what the layers below refuse ends the episode, named
+            return self._end(f"no plan from the measured state: {e}")
+
+    def _act(self, observation: Mapping):
         if self.reason is not None:
             return None, True
         m = measured(observation, self.cubes)
@@ -352,8 +361,8 @@ class ClosedLoopExpert:
         self.forced = 0
         if self._pending_pickups and ("arm-empty",) in canonical:
             cube, self._pending_pickups = self._pending_pickups[0], self._pending_pickups[1:]
-            prefix = (self.roles.action(PICK, cube), self.roles.action(PLACE, cube))
-            return self._forced(prefix, facts)
+            last = (self.roles.action(PICK, cube), self.roles.action(PLACE, cube))
+            return self._forced(self._unpile(cube, canonical) + last, facts)
         loose = self._loose(canonical, m.cubes)
         if loose and ("arm-empty",) in canonical:
             if not self._repair("re-place", f"{loose[0][1]} stands off {loose[0][2]}", step):
@@ -422,22 +431,22 @@ class ClosedLoopExpert:
         return sorted(loose, key=lambda f: cubes[f[1]].translation()[2])
 
     def _re_place(self, fact: tuple, canonical) -> tuple[GroundAction, ...]:
-        """Actions that set ``fact``'s upper cube down again on the lower: the cubes on top
-        of it to the table first."""
-        above = {f[2]: f[1] for f in canonical if f[0] == "on"}
+        """Actions that set ``fact``'s upper cube down again on the lower."""
         cube, support = fact[1], fact[2]
+        last = (self.roles.action(PICK, cube, support), self.roles.action(PLACE, cube, support))
+        return self._unpile(cube, canonical) + last
+
+    def _unpile(self, cube: str, canonical) -> tuple[GroundAction, ...]:
+        """Actions that put the cubes on top of ``cube`` on the table, the top one first."""
+        above = {f[2]: f[1] for f in canonical if f[0] == "on"}
         chain = []
         top = cube
         while top in above:
             chain.append((above[top], top))
             top = above[top]
-        actions = []
+        actions: list[GroundAction] = []
         for upper, lower in reversed(chain):
-            actions += [
-                self.roles.action(PICK, upper, lower),
-                self.roles.action(PLACE, upper),
-            ]
-        actions += [self.roles.action(PICK, cube, support), self.roles.action(PLACE, cube, support)]
+            actions += [self.roles.action(PICK, upper, lower), self.roles.action(PLACE, upper)]
         return tuple(actions)
 
     def _plan_from(self, facts) -> tuple[GroundAction, ...] | None:
