@@ -51,6 +51,7 @@ from cake_drake.symbolic import (
     towers,
     validate_plan,
 )
+from cake_drake.symbolic.planners import overran_time_limit
 from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.cameras import check_cameras
 from cake_drake.world.faults import Move, RandomFault, Slip, check_faults, resolve_random
@@ -371,8 +372,14 @@ def get_plan(checked: Checked) -> Plan:
 
 def call_planner(planner: Planner, spec: str, problem: Problem, time_limit: float | None) -> Plan:
     """Plan with ``planner`` (resolved from ``spec``); what a plug-in returns is checked: a
-    :class:`Plan`, a sequence of ground actions, or None for no plan."""
-    result = planner(problem, time_limit)
+    :class:`Plan`, a sequence of ground actions, or None for no plan. A plug-in that overruns
+    the time limit (its budget) has given up, as a built-in planner does at its limit."""
+    try:
+        result = planner(problem, time_limit)
+    except PluginError as e:
+        if e.overran is None or time_limit is None:
+            raise
+        raise overran_time_limit(problem, spec, time_limit, e.where) from None
     if isinstance(result, Plan):
         if is_plugin(spec):
             checked_plan(problem, result.actions, spec)

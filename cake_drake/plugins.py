@@ -11,10 +11,12 @@ checked, called and recorded exactly as the built-in ones are.
 from __future__ import annotations
 
 import importlib
+import math
 import signal
 import sys
 import sysconfig
 import threading
+import time
 import traceback
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -110,18 +112,33 @@ class PluginError(CakeDrakeError):
     """A plug-in raised, ended the program, returned garbage or overran its budget.
 
     ``trace`` is the full traceback, shown with ``--traceback`` (or
-    ``CAKE_DRAKE_TRACEBACK=1``) for the plug-in's author.
+    ``CAKE_DRAKE_TRACEBACK=1``) for the plug-in's author; ``overran`` is the budget (s)
+    when the plug-in overran it, and ``where`` the user's ``file:line`` it was stopped at.
     """
 
-    def __init__(self, message: str, exit_code: int = BEFORE, trace: str | None = None):
+    def __init__(
+        self,
+        message: str,
+        exit_code: int = BEFORE,
+        trace: str | None = None,
+        overran: float | None = None,
+        where: str | None = None,
+    ):
         super().__init__(message)
         self.exit_code = exit_code
         self.trace = trace
+        self.overran = overran
+        self.where = where
 
 
 class _Overrun(BaseException):
     """Raised inside a plug-in at the end of its budget (not an Exception: a plug-in's own
-    ``except Exception`` does not swallow it)."""
+    ``except Exception`` does not swallow it). ``owner`` is the :class:`budget` that ran
+    out: a call guarded inside another budget reports only its own."""
+
+    def __init__(self, owner: budget | None = None) -> None:
+        super().__init__()
+        self.owner = owner
 
 
 _LIBRARY = tuple(
@@ -168,7 +185,8 @@ def failure(e: BaseException, label: str, exit_code: int, budget_s: float | None
     else:
         text = (str(e).strip().splitlines() or [""])[0]
         message = f"{label} raised {type(e).__name__}{': ' + text if text else ''}{at}"
-    return PluginError(message, exit_code, trace)
+    overran = budget_s if isinstance(e, _Overrun) else None
+    return PluginError(message, exit_code, trace, overran, where)
 
 
 def guarded(
@@ -182,13 +200,19 @@ def guarded(
     """``fn(*args, **kwargs)`` for user code: whatever it raises (an exception, ``SystemExit``,
     endless recursion) or a budget it overruns becomes one :class:`PluginError` line naming
     ``label`` and the user's file:line. Ctrl-C stays an interrupt. The budget (wall clock)
-    is kept in the main thread, and only where no outer budget is running."""
+    is kept in the main thread, inside any other that is running (:class:`budget`): an
+    outer budget that ends first passes through, for its owner to report."""
+    timer = budget(None if budget_s is None else max(budget_s, 1e-3))
     try:
-        with budget(None if budget_s is None else max(budget_s, 1e-3)):
+        with timer:
             return fn(*args, **kwargs)
     except (KeyboardInterrupt, CakeDrakeError):
         raise
-    except (Exception, SystemExit, _Overrun) as e:  # noqa: BLE001 - user code
+    except _Overrun as e:
+        if e.owner is not timer:  # an outer budget ran out while this call was running
+            raise
+        raise failure(e, label, exit_code, budget_s) from None
+    except (Exception, SystemExit) as e:  # noqa: BLE001 - user code
         raise failure(e, label, exit_code, budget_s) from None
 
 
@@ -239,29 +263,77 @@ def raised_in_simulation(
 class budget:
     """A wall-clock budget around a block that runs plug-ins inside Drake's callbacks
     (``with budget(30): simulator.AdvanceTo(t)``): at its end :class:`_Overrun` is raised
-    in whatever Python runs then. Main thread only; none when ``seconds`` is None or an
-    outer budget is running."""
+    in whatever Python runs then. None when ``seconds`` is None or outside the main thread.
+
+    Budgets nest, each keeping its own deadline: one real-time timer (``SIGALRM``) is set
+    for the earliest deadline of all those running, and the overrun raised names the
+    innermost budget that has run out. A timer set by someone else before the outermost
+    budget began is kept as the outermost deadline: its handler is called when it falls
+    due, and it is set again (what is left of it, and its interval) when the last budget
+    ends.
+    """
+
+    _running: list[budget] = []  # the budgets running now, outermost first
+    _foreign: list = []  # [handler, deadline or None, interval] of a timer set before ours
 
     def __init__(self, seconds: float | None) -> None:
         self.seconds = seconds
         self.timed = False
+        self.deadline = math.inf
 
     def __enter__(self) -> budget:
         self.timed = (
-            self.seconds is not None
-            and threading.current_thread() is threading.main_thread()
-            and signal.getitimer(signal.ITIMER_REAL)[0] == 0
+            self.seconds is not None and threading.current_thread() is threading.main_thread()
         )
-        if self.timed:
-
-            def overrun(signum, frame):
-                raise _Overrun()
-
-            self.previous = signal.signal(signal.SIGALRM, overrun)
-            signal.setitimer(signal.ITIMER_REAL, self.seconds)
+        if not self.timed:
+            return self
+        now = time.monotonic()
+        if not budget._running:
+            left, interval = signal.getitimer(signal.ITIMER_REAL)
+            handler = signal.signal(signal.SIGALRM, _budget_alarm)
+            budget._foreign[:] = [handler, now + left if left > 0 else None, interval]
+        self.deadline = now + self.seconds
+        budget._running.append(self)
+        _arm()
         return self
 
     def __exit__(self, *exc) -> None:
-        if self.timed:
-            signal.setitimer(signal.ITIMER_REAL, 0)
-            signal.signal(signal.SIGALRM, self.previous)
+        if not self.timed:
+            return
+        budget._running.remove(self)
+        if budget._running:
+            _arm()
+            return
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        handler, deadline, interval = budget._foreign
+        signal.signal(signal.SIGALRM, handler)
+        if deadline is not None:  # someone else's timer goes on where it was
+            signal.setitimer(signal.ITIMER_REAL, max(deadline - time.monotonic(), 1e-6), interval)
+
+
+def _arm() -> None:
+    """Set the real-time timer for the earliest deadline of the budgets running (and of a
+    foreign timer kept under them)."""
+    deadlines = [b.deadline for b in budget._running]
+    if budget._foreign and budget._foreign[1] is not None:
+        deadlines.append(budget._foreign[1])
+    signal.setitimer(signal.ITIMER_REAL, max(min(deadlines) - time.monotonic(), 1e-6))
+
+
+def _budget_alarm(signum, frame) -> None:
+    now = time.monotonic()
+    due = [b for b in budget._running if b.deadline <= now]
+    if due:
+        raise _Overrun(due[-1])  # the innermost that ran out
+    foreign = budget._foreign
+    if foreign and foreign[1] is not None and foreign[1] <= now:
+        handler, _, interval = foreign
+        foreign[1] = now + interval if interval > 0 else None
+        _arm()
+        if callable(handler):
+            handler(signum, frame)
+        elif handler == signal.SIG_DFL:  # SIGALRM's default: the end of the process
+            signal.signal(signal.SIGALRM, signal.SIG_DFL)
+            signal.raise_signal(signal.SIGALRM)
+        return
+    _arm()  # early by a hair: set again for what is left

@@ -139,13 +139,78 @@ LINE = {
         ("strings", ["returned a list holding str"]),
         ("endless", ["recursed without end", LINE["endless"]]),
         ("exits", ["called sys.exit(0)", LINE["exits"]]),
-        ("sleeps", ["overran its budget of 1 s", LINE["sleeps"]]),
     ],
 )
 def test_a_hostile_planner_is_one_line_and_exit_2_with_nothing_written(folder, planner, words):
     r = run("--planner", f"hostile:{planner}", "--time-limit", "1", "--out", "o", cwd=folder)
     one_line(r, 2, f"planner 'hostile:{planner}'", *words)
     assert not (folder / "o").exists()
+
+
+@pytest.mark.parametrize("command", ["run", "plan"])
+def test_a_planner_plugin_that_overruns_the_time_limit_has_given_up_exit_1(folder, command):
+    """As a built-in planner that gives up at --time-limit: no plan (1), said as what it is."""
+    r = run("--planner", "hostile:sleeps", "--time-limit", "1", cwd=folder, command=command)
+    one_line(
+        r, 1, "no plan found for problem", "within the 1 s time limit",
+        "planner 'hostile:sleeps' overran its time limit", LINE["sleeps"],
+    )  # fmt: skip
+    assert not (folder / "outputs").exists()
+
+
+def test_a_plugin_call_keeps_its_own_budget_inside_a_running_one():
+    """The run's step timer is running: a plug-in's shorter budget still ends it, named."""
+    import time
+
+    from cake_drake.plugins import DURING, PluginError, budget, guarded
+
+    with budget(600), pytest.raises(PluginError) as e:
+        guarded("motion planner 'slow:make'", time.sleep, 30, exit_code=DURING, budget_s=0.5)
+    assert str(e.value).startswith("motion planner 'slow:make' overran its budget of 0.5 s")
+    assert e.value.exit_code == DURING
+
+
+def test_an_outer_budget_that_ends_first_is_its_own_not_the_plugins():
+    import time
+
+    from cake_drake.plugins import _Overrun, budget, guarded
+
+    with pytest.raises(_Overrun) as e, budget(0.3) as outer:
+        guarded("policy 'p:make'", time.sleep, 30, budget_s=60)
+    assert e.value.owner is outer  # not a PluginError blaming the call inside
+    with pytest.raises(_Overrun) as e, budget(0.3) as outer:
+        guarded("policy 'p:make'", lambda: None, budget_s=60)
+        time.sleep(30)  # the outer deadline holds after the inner call ended
+    assert e.value.owner is outer
+
+
+def test_a_timer_set_before_the_budgets_is_kept():
+    import signal
+    import time
+
+    from cake_drake.plugins import budget
+
+    class Rang(Exception):
+        pass
+
+    def ring(signum, frame):
+        raise Rang()
+
+    previous = signal.signal(signal.SIGALRM, ring)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.3)
+        with pytest.raises(Rang), budget(600):
+            time.sleep(30)  # someone else's timer falls due inside the budget
+        assert signal.getsignal(signal.SIGALRM) is ring
+        signal.setitimer(signal.ITIMER_REAL, 0.3)
+        with budget(600):
+            pass
+        assert signal.getitimer(signal.ITIMER_REAL)[0] > 0  # set again where it was
+        with pytest.raises(Rang):
+            time.sleep(30)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def test_an_invalid_plan_from_a_planner_is_no_plan(folder):

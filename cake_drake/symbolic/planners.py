@@ -301,6 +301,17 @@ def _gave_up_message(problem: Problem, planner: str, time_limit: float, detail: 
     )
 
 
+def overran_time_limit(problem: Problem, planner: str, time_limit: float, where: str | None):
+    """A planner plug-in stopped at ``time_limit``: a give-up at the limit, as a built-in
+    planner's is (exit 1), said as what it was."""
+    at = f" (stopped at {where})" if where else ""
+    return NoPlanError(
+        f"no plan found for problem '{problem.name}' within the {time_limit:g} s time limit: "
+        f"planner {planner!r} overran its time limit{at}; this does not prove that no plan "
+        "exists (try a larger --time-limit)"
+    )
+
+
 def _out_of_memory(problem: Problem, planner: str, other: str) -> NoPlanError:
     return NoPlanError(
         f"no plan found for problem '{problem.name}': planner {planner} ran out of "
