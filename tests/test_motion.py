@@ -209,3 +209,23 @@ def test_a_put_down_whose_first_slot_is_boxed_in_goes_to_the_next_free_one():
         places[name] = place.X_WG.translation()[:2]
     assert np.allclose(places["straight"], first, atol=0.01)
     assert np.allclose(places["rrt-connect"], second, atol=0.01)
+
+
+@pytest.mark.parametrize("spec", ["rrt-connect", "examples.via_point_planner:make"])
+def test_a_move_whose_goal_is_in_collision_is_the_layers_own_infeasibility(spec, monkeypatch):
+    """A goal inside the tower (as a transit at zero clearance gives): no planner is asked
+    and none is blamed; the reason is the layer's, fed back as an infeasible action."""
+    from cake_drake.geometric.solve import _path
+
+    monkeypatch.chdir(ROOT)
+    space, query = _blocked_query()
+    kin = Kinematics()
+    inside = make_solver("drake", kin, 0).solve(
+        RigidTransform(gripper_down(0.0), [0.5, 0.0, 0.1]), Q_HOME
+    )
+    assert not space.is_free(inside)
+    planning = Planning(space, make_planner(spec), spec, 0, (kin.lower, kin.upper))
+    for q0, q1, end in [(query.start, inside, "goal"), (inside, query.goal, "start")]:
+        why = _path(planning, 0, "transport", q0, q1, 7)
+        assert isinstance(why, str) and why.startswith(f"its {end} is not free"), why
+    assert planning.queries == []  # the planner was not asked

@@ -10,7 +10,9 @@ The protocol: a planner has a ``name`` and ``plan(query) -> path | reason``, whe
 ``query`` is a :class:`MoveQuery` (start, goal, the collision query, joint limits, the
 seed and the budget) and ``path`` an (N, 7) array of configurations from ``start`` to
 ``goal`` whose straight segments are free, or a string saying why there is none. The
-geometric layer asks only for moves that are blocked, checks the answer (shape, ends,
+geometric layer asks only for moves that are blocked and whose start and goal are both
+free (a move that ends in collision has no free path: the layer says so itself, and the
+action is infeasible as when a planner finds none), checks the answer (shape, ends,
 limits, every segment free) and then times it like every other move.
 """
 

@@ -323,8 +323,16 @@ def _slot_free(world: WorldView, held: str, params: WaypointParams, x: float, y:
 
 
 def _path(planning: Planning, index: int, phase: str, q0, q1, seed: int):
-    """A free path q0 -> q1 from the planner (its every segment checked), or the reason."""
+    """A free path q0 -> q1 from the planner (its every segment checked), or the reason.
+    A move whose start or goal is itself in collision has none, whatever the planner: it
+    is this layer's reason, and the planner is not asked."""
     space = planning.space
+    for end, q in (("start", q0), ("goal", q1)):
+        if not space.is_free(q):
+            hit = space.nearest_hit(q)
+            return f"its {end} is not free" + (
+                f" ({hit[0]} {hit[2] * 1000:.1f} mm from {hit[1]})" if hit else ""
+            )
     lower, upper = planning.limits
     query = MoveQuery(np.array(q0), np.array(q1), space.is_free, lower, upper, seed,
                       planning.budget_s, space.resolution)  # fmt: skip
