@@ -168,7 +168,7 @@ def disturbed_episode(
     expert.reset(task, seed)
     rng = np.random.default_rng([seed, 36])
     onset = int(rng.integers(*ONSET)) if disturb_steps > 0 else None
-    disturbed_at, dropped, steps = None, False, 0
+    disturbed_at, dropped, steps, said_done = None, False, 0, False
     terminated = truncated = False
     while not (terminated or truncated):
         if disturbed_at is None and onset is not None and steps >= onset and held(obs, task.cubes):
@@ -183,6 +183,7 @@ def disturbed_episode(
         answer = expert.act(obs)
         action, done = answer if isinstance(answer, tuple) else (answer, False)
         if action is None:
+            said_done = True
             break
         obs, _, terminated, truncated, info = env.step(action)
         steps += 1
@@ -190,7 +191,13 @@ def disturbed_episode(
     if info["is_success"]:
         reason = "goal reached"
     elif reason is None:
-        reason = "a cube left the table" if terminated else f"not done after {steps} steps"
+        reason = (
+            "the expert said done"
+            if said_done
+            else "a cube left the table"
+            if terminated
+            else f"not done after {steps} steps"
+        )
     return Outcome(seed, bool(info["is_success"]), steps, disturbed_at, dropped, reason)
 
 
