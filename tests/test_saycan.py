@@ -28,15 +28,24 @@ from cake_drake.language import (
     analyse,
     load_transcript,
     method_bindings,
+    missing_objects,
     parse_transcript,
     render_markdown,
     render_text,
     side_by_side,
+    with_objects,
 )
 from cake_drake.language.mapping import match_verb
-from cake_drake.language.report import comparison_rows
+from cake_drake.language.report import comparison_rows, render_note
 from cake_drake.language.transcript import normalise
-from cake_drake.symbolic import MODELS_DIR, GroundAction, load_problem, read_plan, validate_plan
+from cake_drake.symbolic import (
+    MODELS_DIR,
+    GroundAction,
+    load_problem,
+    parse_problem,
+    read_plan,
+    validate_plan,
+)
 
 PDDL = MODELS_DIR / "pddl"
 
@@ -546,6 +555,7 @@ def test_garbage_never_raises_anything_but_input_errors(kitchen, drawer_task):
 
 C, V, S = MAPS_CLEANLY, MAPS_VIA_METHOD, MAPS_TO_SEVERAL
 P, A, N, X = PRECONDITION_FAILS, AMBIGUOUS, NOT_REACHED, NO_SCHEMA
+ADDED = "+objects"  # SayCan's kitchen with the transcript's missing objects added
 
 #: SayCan's own step lists: (problem or None for the default kitchen, ok, verdicts).
 CITED = {
@@ -559,6 +569,20 @@ CITED = {
     "saycan_mountain_dew": ("kitchen_prompt", True, [C, C, C, V, C, C, C, C, DONE]),
     "saycan_coffee_cup": ("kitchen_prompt", True, [C, C, C, V, DONE]),
     "saycan_grapes_cheese": ("kitchen_prompt", False, [C, C, C, V, P, N, N, DONE]),
+    # The rest of the planning prompt: SayCan's kitchen, with --add-objects where the
+    # example names things the kitchen lacks (ADDED).
+    "saycan_snickers": (ADDED, False, [P, DONE]),
+    "saycan_trailmix_here": (ADDED, False, [P, DONE]),
+    "saycan_water_oatmeal_microwave": (ADDED, True, [C] * 8 + [DONE]),
+    "saycan_grapefruit_bowl": (ADDED, True, [C, C, C, V, DONE]),
+    "saycan_sponge_sink": (None, True, [C, C, C, V, DONE]),
+    "saycan_water_bottle_counter": (None, False, [C, C, A, N, DONE]),
+    "saycan_twix_dried_fruit": (ADDED, True, [C] * 8 + [DONE]),
+    "saycan_orange": (ADDED, True, [C] * 4 + [DONE]),
+    "saycan_coke_can": (None, True, [C] * 4 + [DONE]),
+    "saycan_banana_let_go": (ADDED, False, [P, DONE]),
+    "saycan_pick_up_peanuts": (ADDED, False, [P, DONE]),
+    "saycan_bring_peanuts": (ADDED, False, [P, N, N, DONE]),
 }
 
 #: Our own teaching cases.
@@ -583,9 +607,11 @@ def test_every_shipped_transcript_is_covered_and_the_cited_ones_cite():
         assert "not taken from the paper" in (TRANSCRIPTS_DIR / f"{name}.txt").read_text()
 
 
-def _problem(problem_name, kitchen):
+def _problem(problem_name, kitchen, transcript=None):
     if problem_name is None:
         return kitchen
+    if problem_name == ADDED:
+        return with_objects(kitchen, missing_objects(transcript, kitchen))
     return load_problem(KITCHEN_DOMAIN, PDDL / f"{problem_name}.pddl", require_goal=False)
 
 
@@ -593,7 +619,7 @@ def _problem(problem_name, kitchen):
 def test_shipped_transcripts_give_the_documented_verdicts(name, kitchen):
     problem_name, ok, expected = SHIPPED[name]
     t = load_transcript(TRANSCRIPTS_DIR / f"{name}.txt")
-    a = analyse(t, _problem(problem_name, kitchen), planner=None)
+    a = analyse(t, _problem(problem_name, kitchen, t), planner=None)
     assert verdicts(a) == expected
     assert a.ok == ok
     if name in CITED and t.goal is not None:
@@ -700,8 +726,8 @@ def test_cli_bad_inputs_exit_2(args, expected):
 
 def test_add_objects_declares_what_the_transcript_names_and_the_kitchen_lacks(tmp_path):
     """SayCan's own kitchen has no banana: without --add-objects its steps have no schema;
-    with it the banana is declared (an item: the skill 'find' takes one) and the first
-    step fails on what nobody said, where the banana is."""
+    with it the banana is declared (an item: the skill 'find' takes one) at a place of its
+    own, and "find a banana" goes there: the plan runs, nothing is blamed on the model."""
     t = tmp_path / "banana.txt"
     t.write_text(
         "Human: Bring me a banana\nRobot: 1. find a banana, 2. pick up the banana, "
@@ -711,7 +737,71 @@ def test_add_objects_declares_what_the_transcript_names_and_the_kitchen_lacks(tm
     assert plain.returncode == 1 and "added objects" not in plain.stderr
     assert re.search(r"1\s+find a banana\s+no schema", plain.stdout), plain.stdout
     added = saycan(str(t), "--out", str(tmp_path / "added"), "--add-objects")
-    assert added.returncode == 1, added.stderr
+    assert added.returncode == 0, added.stdout + added.stderr
     assert "added objects: banana (item)" in added.stderr
-    assert re.search(r"1\s+find a banana\s+precondition fails", added.stdout), added.stdout
-    assert "banana - item" in (tmp_path / "added" / "problem.pddl").read_text()
+    assert re.search(
+        r"1\s+find a banana\s+maps cleanly\s+\(find banana close-counter banana-spot\)",
+        added.stdout,
+    ), added.stdout
+    assert "assumed" not in added.stdout
+    problem = (tmp_path / "added" / "problem.pddl").read_text()
+    assert "banana - item" in problem and "banana-spot - location" in problem
+    # The banana stands only at its own spot: no place of the kitchen was chosen for it.
+    assert re.findall(r"\(at-location banana [^)]*\)", problem) == [
+        "(at-location banana banana-spot)"
+    ]
+
+
+def _with_added_objects(name, kitchen):
+    t = load_transcript(TRANSCRIPTS_DIR / f"{name}.txt")
+    return analyse(t, with_objects(kitchen, missing_objects(t, kitchen)), planner=None)
+
+
+def test_an_added_object_is_where_the_first_find_seeks_it_and_the_note_blames_no_one(kitchen):
+    """The prompt's throw-away example in SayCan's own kitchen: "find a sprite can" must not
+    stop at a place we chose for the can ("sprite-can is at bowl-area"), and the note must
+    not call that place a precondition the language model assumed."""
+    dew = _with_added_objects("saycan_mountain_dew", kitchen)
+    assert dew.steps[0].verdict == MAPS_CLEANLY, dew.steps[0].detail
+    assert str(dew.steps[0].actions[0]) == "(find sprite-can close-counter sprite-can-spot)"
+    assert dew.executable and verdicts(dew) == [C, C, C, V, C, C, C, C, DONE]
+    assert ("contains", "trash-can", "sprite-can") in dew.final_state
+    assert ("at-location", "mountain-dew-can", "user") in dew.final_state
+    note = "\n".join(render_note(dew))
+    assert "assumed" not in note and "bowl-area" not in render_text(dew)
+
+
+def test_what_the_model_did_assume_about_an_added_object_is_still_named(kitchen):
+    """Leaving the place open does not hide the model's real omissions: "pick up the
+    peanuts" with no find assumes them within reach, and "pick up the cheese" after the
+    grapes assumes the robot already stands where the cheese is (the rice-chips-and-tea
+    shape of the chain-of-thought prompt)."""
+    peanuts = _with_added_objects("saycan_pick_up_peanuts", kitchen)
+    assert peanuts.steps[0].unmet == (("at-location", "robot", "peanut-spot"),)
+    note = "\n".join(render_note(peanuts))
+    assert (
+        "a precondition the language model assumed (step 1): the robot is at peanut-spot "
+        "(a 'find peanut' step would have taken it there)" in note
+    )
+    cheese = _with_added_objects("saycan_grapes_cheese", kitchen)
+    assert verdicts(cheese) == [C, C, C, V, P, N, N, DONE]
+    assert cheese.steps[4].unmet == (("at-location", "robot", "cheese-spot"),)
+    trailmix = _with_added_objects("saycan_trailmix_here", kitchen)
+    assert trailmix.steps[0].unmet == (("in-hand", "trailmix"),)
+
+
+def test_a_thing_the_problem_places_nowhere_is_the_problems_gap_not_the_models(kitchen):
+    """A problem of the user's that declares a banana and says nothing of where it is: the
+    place the failing find tries is only a binding, and the note says the problem lacks a
+    fact instead of naming that place as the language model's assumption."""
+    text = kitchen.text.replace("water-bottle - item", "water-bottle banana - item")
+    bare = parse_problem(kitchen.domain, text, "bare.pddl", require_goal=False)
+    a = run("1. find a banana, 2. pick up the banana, 3. done", bare)
+    assert verdicts(a) == [P, N, DONE] and a.steps[0].unplaced == ("banana",)
+    note = "\n".join(render_note(a))
+    assert "a fact the problem lacks (step 1): a place for banana" in note
+    assert "assumed" not in note
+    # A thing the problem does place keeps the model's assumption (the chips in hand).
+    here = analyse(load_transcript(TRANSCRIPTS_DIR / "saycan_kettle_chips_here.txt"), kitchen, None)
+    assert here.steps[0].unplaced == ()
+    assert "a precondition the language model assumed (step 1)" in "\n".join(render_note(here))

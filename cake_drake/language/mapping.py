@@ -98,6 +98,7 @@ class StepResult:
     candidates: tuple[str, ...] = ()
     need: str = ""
     resolved: tuple[tuple[str, str], ...] = ()  # (noun phrase, object) as read
+    unplaced: tuple[str, ...] = ()  # objects the state places nowhere (see map_step)
 
     @property
     def applied(self) -> tuple[GroundAction, ...]:
@@ -537,6 +538,13 @@ def map_step(
         return result, new_state
     unmet_sorted = tuple(sorted(unmet))
     need = ", ".join(assumed(f) for f in unmet_sorted)
+    unplaced = _unplaced(problem, state, actions[-1], unmet_sorted)
+    if unplaced:
+        # Where the item is was never said, by the problem or by the transcript: the place
+        # in the action is only the binding tried, so nothing here is the model's assumption.
+        need = ", ".join(
+            f"a place for {o} (no fact of the problem says where it is)" for o in unplaced
+        )
     for f in unmet_sorted:
         if f[0] == "at-location" and f[1] == "robot":
             here = [a for a in actions[-1].args if ("at-location", a, f[2]) in state]
@@ -547,6 +555,8 @@ def map_step(
         detail = f"method {method.name}: {why}; " + detail
     if notes:
         detail += "; " + "; ".join(notes)
+    if unplaced:
+        detail += "; " + ", ".join(f"no fact says where {o} is" for o in unplaced)
     result = StepResult(
         step,
         PRECONDITION_FAILS,
@@ -559,8 +569,26 @@ def map_step(
         failed=True,
         need=need,
         resolved=resolved,
+        unplaced=unplaced,
     )
     return result, state
+
+
+def _unplaced(
+    problem: Problem, state: frozenset[Fact], action: GroundAction, unmet: tuple[Fact, ...]
+) -> tuple[str, ...]:
+    """The arguments of ``action`` that an unmet fact wants somewhere and that ``state``
+    places nowhere: no fact says where they are, none holds or contains them."""
+    statics = problem.domain.static_predicates
+    out = []
+    for obj in dict.fromkeys(action.args):
+        where = _where_predicates(problem, problem.object_types[obj])
+        if not any(f[0] in where and f[1] == obj for f in unmet):
+            continue
+        if any(obj in f[1:] and (f[0] in where or f[0] not in statics) for f in state):
+            continue
+        out.append(obj)
+    return tuple(out)
 
 
 def lexical_verdict(
@@ -787,23 +815,75 @@ def missing_objects(transcript: Transcript, problem: Problem) -> list[tuple[str,
     return list(found.items())
 
 
+def _where_predicates(problem: Problem, kind: str) -> list[str]:
+    """The predicates that say where a thing of type ``kind`` is: ``(P ?x - T ?l - location)``
+    with ``kind`` a subtype of ``T`` (``at-location`` for an item, ``container-at`` for a
+    container; none for a location)."""
+    domain = problem.domain
+    return [
+        pred.name
+        for pred in domain.predicates.values()
+        if len(pred.params) == 2
+        and pred.params[1][1] == "location"
+        and domain.is_subtype(kind, pred.params[0][1])
+    ]
+
+
+def _section_end(text: str, start: int) -> int:
+    """The index of the parenthesis that closes the one opened at ``start``."""
+    depth, i = 0, start
+    while i < len(text):
+        depth += {"(": 1, ")": -1}.get(text[i], 0)
+        if depth == 0:
+            return i
+        i += 1
+    return i
+
+
 def with_objects(problem: Problem, objects: list[tuple[str, str]]) -> Problem:
-    """``problem`` with ``objects`` declared (no facts about them: where they are is not
-    known, and a step that needs it says so)."""
+    """``problem`` with ``objects`` declared, each thing that stands somewhere at a place of
+    its own, ``<name>-spot``: a location no other fact names.
+
+    Nobody said where an added object is, so no place of the kitchen is chosen for it: the
+    spot only says that it is somewhere, and only a step that goes where the object is
+    (``find``) reaches it. A step that needs the object elsewhere, in hand or where the
+    robot already stands fails on what the transcript itself assumed.
+    """
     if not objects:
         return problem
     text = problem.text
     m = re.search(r"\(:objects\b", text, re.IGNORECASE)
     if m is None:
         raise InputError(f"{problem.problem_path}: no (:objects ...) to add objects to")
-    depth, i = 0, m.start()
-    while i < len(text):
-        depth += {"(": 1, ")": -1}.get(text[i], 0)
-        if depth == 0:
-            break
-        i += 1
+    declared = set(problem.object_types) | {name for name, _ in objects}
+    spots: list[str] = []
+    facts: list[str] = []
+    for name, kind in objects:
+        where = _where_predicates(problem, kind)
+        if not where:
+            continue
+        spot = f"{name}-spot"
+        while spot in declared:
+            spot += "-"
+        declared.add(spot)
+        spots.append(spot)
+        facts += [f"({pred} {name} {spot})" for pred in where]
+    i = _section_end(text, m.start())
     added = "".join(f"\n    {name} - {kind}" for name, kind in objects)
+    added += "".join(f"\n    {spot} - location" for spot in spots)
     composed = text[:i] + added + "  ; added by --add-objects\n  " + text[i:]
+    if facts:
+        init = re.search(r"\(:init\b", composed, re.IGNORECASE)
+        if init is None:
+            raise InputError(f"{problem.problem_path}: no (:init ...) to place objects in")
+        j = init.end()
+        where_facts = " ".join(facts)
+        composed = (
+            composed[:j]
+            + "\n    ; added by --add-objects: each in a place of its own, where nobody said\n"
+            + f"    {where_facts}"
+            + composed[j:]
+        )
     return parse_problem(
         problem.domain, composed, problem.problem_path, require_goal=problem.has_goal
     )

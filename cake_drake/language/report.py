@@ -166,6 +166,9 @@ def render_note(analysis: Analysis) -> list[str]:
     for r in sorted(methods, key=lambda r: r.step.number):
         needs.append(f"a method (step {r.step.number}): {r.need}")
     for r in by[PRECONDITION_FAILS]:
+        if r.unplaced:  # the problem, not the model, left out where a thing is
+            needs.append(f"a fact the problem lacks (step {r.step.number}): {r.need}")
+            continue
         line = f"a precondition the language model assumed (step {r.step.number}): {r.need}"
         if analysis.planner_plan is not None:
             fixes = [
