@@ -805,3 +805,21 @@ def test_a_thing_the_problem_places_nowhere_is_the_problems_gap_not_the_models(k
     here = analyse(load_transcript(TRANSCRIPTS_DIR / "saycan_kettle_chips_here.txt"), kitchen, None)
     assert here.steps[0].unplaced == ()
     assert "a precondition the language model assumed (step 1)" in "\n".join(render_note(here))
+
+
+#: The sentence of docs/saycan.md that states the measurement below.
+SURVEY = re.compile(
+    r"\*\*(\d+) of the (\d+)\*\* SayCan transcripts map fully with `--add-objects` "
+    r"\((\d+) before"
+)
+
+
+def test_the_add_objects_count_in_the_docs_is_the_measured_one(kitchen):
+    """Every SayCan transcript that ships, in SayCan's own kitchen with --add-objects: how
+    many map fully (every step maps and applies), as docs/saycan.md states."""
+    paths = sorted(TRANSCRIPTS_DIR.glob("saycan_*.txt"))
+    full = [p.stem for p in paths if _with_added_objects(p.stem, kitchen).executable]
+    found = SURVEY.search((MODELS_DIR.parent / "docs" / "saycan.md").read_text())
+    assert found, "docs/saycan.md states no add-objects count"
+    assert (int(found[1]), int(found[2])) == (len(full), len(paths)), full
+    assert int(found[3]) < len(full)
