@@ -368,3 +368,53 @@ def test_resume_with_another_action_space_is_refused(trained, tmp_path):
     r = cake("record", str(tmp_path / "ee.yaml"), "--name", "stack2", "--out", str(ds),
              "--episodes", "4", "--resume", "--no-cameras")  # fmt: skip
     one_line(r, 2, "--resume with another control_mode", "'joint_position'", "'ee_delta'")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [2, 15], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_to_a_recording_on_two_workers_ends_it_in_one_line(tmp_path, sig):
+    """As a terminal's Ctrl-C does (the whole process group): the recording keeps what
+    finished and ends at once, its workers gone."""
+    import signal
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.record", str(LEARNING), "--name", "stack2",
+         "--out", "ds", "--episodes", "40", "--workers", "2", "--no-cameras"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 300
+    while not list((tmp_path / "ds" / "episodes").glob("ep_*.json")):  # one finished
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "no episode finished"
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.Signals(sig))
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    assert list((tmp_path / "ds" / "episodes").glob("ep_*.json"))  # what finished is kept
+    gone = time.monotonic() + 30  # nothing of the group is left (the workers were ended)
+    while time.monotonic() < gone:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    else:
+        pytest.fail("processes of the recording were left running")
+
+
+@pytest.mark.slow
+def test_a_bad_policy_on_two_workers_is_one_line_with_its_exit_code(tmp_path):
+    (tmp_path / "bad.py").write_text(
+        "class Bad:\n    def reset(self, task, seed): pass\n"
+        "    def act(self, o): return ('x',)\n\ndef make(): return Bad()\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.evaluate", "bad:make", "--suite", str(LEARNING),
+         "--name", "stack2", "--episodes", "2", "--workers", "2", "--out", "o"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+        env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
+    )  # fmt: skip
+    one_line(r, 3, "policy 'bad:make' returned a tuple of 1")

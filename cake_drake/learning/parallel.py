@@ -1,21 +1,62 @@
-"""Episodes spread over workers: here, on a pool of spawned processes, or on Ray."""
+"""Episodes spread over workers: here, on a local pool of spawned processes, or on Ray.
+
+The local pool is the sweeps' (:func:`cake_drake.sweeps.pool.spawn_imap`): whatever stops
+it (the last episode, an error, Ctrl-C or SIGTERM), its workers are told, joined with a
+deadline, then killed. A worker's :class:`~cake_drake.errors.CakeDrakeError` (a policy
+plug-in that failed, bad input) comes back as itself: its one line and its exit code.
+"""
 
 from __future__ import annotations
 
-import multiprocessing
+from dataclasses import dataclass
+
+from cake_drake.errors import CakeDrakeError
+
+
+@dataclass
+class _Failed:
+    """A worker's CakeDrakeError, carried back as data (its class's own pickling would
+    lose the exit code)."""
+
+    message: str
+    exit_code: int
+    trace: str | None
+
+
+def _guarded_call(pair):
+    """``fn(job)`` for ``pair = (fn, job)``, in a worker (a module-level function, which
+    spawned processes and Ray both take by name)."""
+    fn, job = pair
+    try:
+        return fn(job)
+    except CakeDrakeError as e:
+        return _Failed(str(e), e.exit_code, getattr(e, "trace", None))
+
+
+def _raise(answer):
+    if isinstance(answer, _Failed):
+        error = CakeDrakeError(answer.message)
+        error.exit_code, error.trace = answer.exit_code, answer.trace
+        raise error
+    return answer
 
 
 def imap(fn, jobs, workers: int, ray=None):
     """``fn(job)`` for every job, yielded as each finishes: here (one worker), on a pool
     of spawned processes, or on ``ray`` (a :class:`cake_drake.sweeps.RayCluster`)."""
     if ray is not None:
-        yield from ray.imap(fn, jobs)
+        yield from (_raise(a) for a in ray.imap(_guarded_call, [(fn, j) for j in jobs]))
     elif workers <= 1 or len(jobs) <= 1:
         yield from (fn(j) for j in jobs)
     else:
-        ctx = multiprocessing.get_context("spawn")
-        with ctx.Pool(min(workers, len(jobs))) as pool:
-            yield from pool.imap_unordered(fn, jobs, chunksize=1)
+        from cake_drake.sweeps.pool import spawn_imap
+
+        pairs = [(fn, j) for j in jobs]
+        answers = spawn_imap(_guarded_call, pairs, min(workers, len(jobs)))
+        try:
+            yield from (_raise(a) for a in answers)
+        finally:  # an error, or a caller that stops early: the workers end now, not at exit
+            answers.close()
 
 
 def map_ordered(fn, jobs, workers: int, ray=None) -> list:
