@@ -60,6 +60,7 @@ class HeldAction:
 
     action = None
     label = "the action given to CakeDrake/Stack-v0's step()"
+    act_budget_s = None  # it only hands over what step() was given
 
     def reset(self, task, seed) -> None:
         pass

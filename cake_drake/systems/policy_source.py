@@ -102,6 +102,11 @@ class PolicySource(LeafSystem):
         self.last_action: np.ndarray | None = None
         self._chunk: deque = deque()
         self._observed: tuple | None = None
+        #: A policy may carry its own per-call budget (s); None: none (the Gym env's own).
+        self._budget_s = getattr(policy, "act_budget_s", ACT_BUDGET_S)
+        self._desired, self._fingers = np.zeros(14), np.zeros(4)
+        self._count, self._labels = np.zeros(1), np.zeros(2)
+        self._written: tuple | None = None
         self._q = np.asarray(q_start, float).copy()
         self._width = spaces.GRIPPER_MAX
         self._arm = self.DeclareVectorInputPort("arm_state", 14)
@@ -164,8 +169,9 @@ class PolicySource(LeafSystem):
             for name, port in self._images.items()
         }
         obs = Observation(values, images)
-        #: The measured poses behind it (name -> X_WB) and each finger's opening (m).
-        obs.cube_poses, obs.finger = X_cubes, float(hand[0])
+        #: The measured poses behind it (cube name -> X_WB, the grasp frame's X_WG) and each
+        #: finger's opening (m).
+        obs.cube_poses, obs.X_WG, obs.finger = X_cubes, X_WG, float(hand[0])
         self._observed = (key, obs)
         return obs
 
@@ -181,7 +187,7 @@ class PolicySource(LeafSystem):
         if not self._chunk:
             obs = self.observe(context)
             answer = guarded(
-                self.label, self.policy.act, obs, exit_code=DURING, budget_s=ACT_BUDGET_S
+                self.label, self.policy.act, obs, exit_code=DURING, budget_s=self._budget_s
             )
             action, said_done = spaces.read_answer(answer, self.label)
             if said_done and action is None:
@@ -195,10 +201,7 @@ class PolicySource(LeafSystem):
             if self.space == "joint_chunk":
                 self._chunk.extend(a[: spaces.periods(self.space, self.options)])
             elif self.space == "ee_delta":
-                X_WG = self._poses.Eval(context)[self.world.hand_body].multiply(
-                    self.world.X_hand_grasp
-                )
-                q = spaces.ee_target(a[:6], X_WG, self.ik, self._q, self.counts)
+                q = spaces.ee_target(a[:6], obs.X_WG, self.ik, self._q, self.counts)
                 if q is not None:
                     self._q = q
                 self._width = float(a[6]) * spaces.GRIPPER_MAX
@@ -211,15 +214,22 @@ class PolicySource(LeafSystem):
             self._q, self._width = np.array(row[:7]), float(row[7])
         self.steps += 1
         self.counts.steps = self.steps
-        values = {
-            "desired_state": np.r_[self._q, np.zeros(7)],
-            "desired_acceleration": np.zeros(7),
-            "finger_state": np.array([self._width / 2, self._width / 2, 0.0, 0.0]),
-            "actions_done": np.array([float(self.steps)]),
-            "labels": np.array([0.0, float(self.steps - 1)]),
-        }
-        for name, index in self._groups.items():
-            state.get_mutable_discrete_state(index).set_value(values[name])
+        # Only what changed is written (desired_acceleration stays zero).
+        held = (self._q.tobytes(), self._width)
+        if held != self._written:
+            self._written = held
+            self._desired[:7] = self._q
+            self._fingers[:2] = self._width / 2
+            state.get_mutable_discrete_state(self._groups["desired_state"]).set_value(
+                self._desired
+            )
+            state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(
+                self._fingers
+            )
+        self._count[0] = self.steps
+        self._labels[1] = self.steps - 1
+        state.get_mutable_discrete_state(self._groups["actions_done"]).set_value(self._count)
+        state.get_mutable_discrete_state(self._groups["labels"]).set_value(self._labels)
 
     def finished(self) -> bool:
         return self.done
