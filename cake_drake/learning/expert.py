@@ -66,7 +66,14 @@ from cake_drake.geometric.waypoints import (
     gripper_down,
 )
 from cake_drake.policy.spaces import EE_STEP, GRIPPER_MAX
-from cake_drake.symbolic import GroundAction, Plan, Problem, fact_str, validate_plan
+from cake_drake.symbolic import (
+    DEFAULT_PLANNER,
+    GroundAction,
+    Plan,
+    Problem,
+    fact_str,
+    validate_plan,
+)
 from cake_drake.symbolic.grounding import apply_action
 from cake_drake.symbolic.kernels import kernels, latest_kernel
 from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
@@ -89,6 +96,8 @@ LAG_STEPS = 2
 OFF_TRACK = (0.05, 0.3)
 #: s the motion's clock may wait for the hand before the motion is planned again.
 STALL_S = 3.0
+#: Motions the hand does not follow, one after the other, before the expert gives up.
+MAX_STALLS = 3
 #: m the hand may move between two steps and count as still (a release measures it still).
 STILL = 0.001
 #: Extra steps (at most) a gripper change is waited for before the facts must show it.
@@ -214,7 +223,7 @@ class ClosedLoopExpert:
         vocabulary = set(self.roles.vocabulary.as_dict().values())
         self.static = frozenset(f for f in self.problem.init if f[0] not in vocabulary)
         t = scenario.task
-        spec = t.planner if not t.plan else "pyperplan"
+        spec = t.planner if not t.plan else DEFAULT_PLANNER  # a plan file: replan with it
         self.planner = resolve(
             spec, PLANNER_REGISTRY, "planner", budget=lambda problem, limit: limit
         )
@@ -251,6 +260,7 @@ class ClosedLoopExpert:
         self._previous_cubes: dict[str, RigidTransform] | None = None
         self.stranded: set[str] = set()  # cubes taken as on the table (see act)
         self._pending_pickups: tuple[str, ...] = ()
+        self._stalls = 0  # motions dropped in a row because the hand did not follow
 
     def _set_plan(self, actions: tuple[GroundAction, ...]) -> None:
         self.plan = actions
@@ -309,6 +319,9 @@ class ClosedLoopExpert:
         if a is not None:
             why = self._off(a, m, facts)
             if why is not None:
+                self._stalls = self._stalls + 1 if "not followed" in why else 0
+                if self._stalls >= MAX_STALLS:
+                    return self._end(f"no motion for {a.action}: the hand is held back")
                 self._repair("dropped", why, step)
                 a = self.current = None
             elif a.tau >= a.trajectory.end_time - 1e-9 and self._near(a, m, a.tau, lag=0):
@@ -320,7 +333,7 @@ class ClosedLoopExpert:
                     except CakeDrakeError as e:
                         return self._end(f"no motion for {a.action}: {e}")
                 else:
-                    self.next = a.pos + 1
+                    self.next, self._stalls = a.pos + 1, 0
                     a = self.current = None
         if a is None:
             i = None if self.reason is not None else self._choose(facts, canonical, m, step)
