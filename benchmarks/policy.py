@@ -8,13 +8,21 @@ expert's success rate over seeded generated problems.
 (b) success: the expert (``examples/expert_policy.py``) through the environment on
     ``--seeds`` generated problems of 3 to 8 blocks in ``ee_delta`` (the goal is 95 %),
     and the random policy on the same problems (the measure must be able to fail).
+(c) the step's own cost, as ratios in one run: the ``state`` step against ``AdvanceTo``
+    over the same period of the same Diagram with the action held and the slot's update
+    doing nothing (no per-step Python of ours); the ``state+rgb`` step against the
+    ``state`` step plus one frame per camera (goals: 1.15 and 1.15).
+(d) ``--vector N``: ``gymnasium.make_vec(..., vectorization_mode="async")`` with 1, 2,
+    4 ... N environments, one process each: aggregate steps per second and the scaling
+    efficiency (steps/s of N environments / (N x one environment's)).
 
-    python benchmarks/policy.py [--seeds 30] [--steps 200]
+    python benchmarks/policy.py [--seeds 30] [--steps 200] [--vector N] [--only c,d]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -73,6 +81,59 @@ def frame_cost(n: int = 50) -> float:
     return (time.perf_counter() - t0) / n * 1000
 
 
+def _held(env, mode):
+    """An action that holds the arm where it is (a joint target at the measured joints)."""
+    if mode == "ee_delta":
+        return np.r_[np.zeros(6), 1.0]
+    return _home(env, mode)
+
+
+def overhead(mode: str, steps: int, cameras: int = 2) -> dict[str, float]:
+    """(c): ms per ``state`` step, per bare ``AdvanceTo``, per ``state+rgb`` step and per
+    frame, measured in turn on the same kind of episode."""
+    out = {}
+    for obs_mode in ("state", "state+rgb"):
+        env = gymnasium.make(ENV_ID, blocks=5, control_mode=mode, obs_mode=obs_mode)
+        env.reset(seed=0)
+        a = _held(env, mode)
+        for _ in range(5):
+            env.step(a)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            env.step(a)
+        out[obs_mode] = (time.perf_counter() - t0) / steps * 1000
+        if obs_mode == "state":  # the same Diagram, the slot's update doing nothing
+            u = env.unwrapped
+            u._source.done = True
+            context = u._simulator.get_context()
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                u._simulator.AdvanceTo(context.get_time() + 1.0 / u.rate_hz)
+            out["advance"] = (time.perf_counter() - t0) / steps * 1000
+    out["frame"] = frame_cost()
+    out["state_ratio"] = out["state"] / out["advance"]
+    out["rgb_ratio"] = out["state+rgb"] / (out["state"] + cameras * out["frame"])
+    return out
+
+
+def vector_speed(n: int, steps: int) -> float:
+    """(d): aggregate steps per second of ``n`` environments in ``n`` processes."""
+    envs = gymnasium.make_vec(
+        ENV_ID, num_envs=n, vectorization_mode="async", blocks=5, control_mode="ee_delta"
+    )
+    try:
+        envs.reset(seed=list(range(n)))
+        a = np.tile(np.r_[np.zeros(6), 1.0].astype(np.float32), (n, 1))
+        for _ in range(5):
+            envs.step(a)
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            envs.step(a)
+        return n * steps / (time.perf_counter() - t0)
+    finally:
+        envs.close()
+
+
 def success(
     policy: str, seeds: int, mode: str = "ee_delta", max_steps: int = 2000
 ) -> tuple[list[bool], list[int]]:
@@ -103,19 +164,50 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, default=30, help="generated problems for (b)")
     p.add_argument("--steps", type=int, default=200, help="environment steps per row of (a)")
+    p.add_argument("--vector", type=int, default=0, help="(d) up to N environments at once")
+    p.add_argument("--only", default="a,b,c,d", help="which parts to run (a,b,c,d)")
     args = p.parse_args()
+    parts = set(args.only.split(","))
     print(machine())
     print(renderer_line())  # the GL implementation the cameras render with: a GPU or llvmpipe
-    print(f"(a) environment steps per second, 10 Hz control, 10 ms steps, {args.steps} steps")
+    if "c" in parts:
+        print("(c) the step's own cost, ms (ratios: goals <= 1.15)")
+        for mode in ("ee_delta", "joint_position"):
+            o = overhead(mode, args.steps)
+            print(
+                f"{mode:<16} state {o['state']:.2f}, AdvanceTo alone {o['advance']:.2f} "
+                f"-> {o['state_ratio']:.2f}; state+rgb {o['state+rgb']:.2f} vs state + 2 "
+                f"frames of {o['frame']:.2f} -> {o['rgb_ratio']:.2f}"
+            )
+    if "d" in parts and args.vector:
+        print(f"(d) AsyncVectorEnv, state, ee_delta, {os.cpu_count()} cores")
+        one = None
+        n = 1
+        while n <= args.vector:
+            rate = vector_speed(n, max(50, args.steps // 2))
+            one = one or rate
+            print(f"  x{n:<3} {rate:8.1f} steps/s   scaling efficiency {rate / (n * one):.0%}")
+            n = n * 2 if n * 2 <= args.vector or n == args.vector else args.vector
+    if "a" in parts:
+        table(args.steps)
+    if "b" in parts:
+        successes(args.seeds)
+
+
+def table(steps: int) -> None:
+    print(f"(a) environment steps per second, 10 Hz control, 10 ms steps, {steps} steps")
     print(f"{'control mode':<16}{'obs mode':<12}{'env steps/s':>12}{'control periods/s':>19}")
     for mode in ("ee_delta", "joint_position", "joint_chunk"):
         for obs_mode in ("state", "state+rgb"):
-            per_s, periods = speed(mode, obs_mode, args.steps)
+            per_s, periods = speed(mode, obs_mode, steps)
             print(f"{mode:<16}{obs_mode:<12}{per_s:>12.1f}{periods:>19.1f}")
     print(f"one 224 x 224 frame: {frame_cost():.1f} ms")
-    print(f"(b) success over {args.seeds} generated problems of 3 to 8 blocks, ee_delta")
+
+
+def successes(seeds: int) -> None:
+    print(f"(b) success over {seeds} generated problems of 3 to 8 blocks, ee_delta")
     for policy in ("expert_policy", "random_policy"):
-        won, steps = success(policy, args.seeds, max_steps=2000 if "expert" in policy else 300)
+        won, steps = success(policy, seeds, max_steps=2000 if "expert" in policy else 300)
         lo, hi = wilson(sum(won), len(won))
         print(
             f"{policy:<16} {sum(won)}/{len(won)} = {np.mean(won):.0%} "

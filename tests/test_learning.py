@@ -418,3 +418,19 @@ def test_a_bad_policy_on_two_workers_is_one_line_with_its_exit_code(tmp_path):
         env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
     )  # fmt: skip
     one_line(r, 3, "policy 'bad:make' returned a tuple of 1")
+
+
+def test_make_vec_runs_the_environment_in_two_processes():
+    envs = gymnasium.make_vec(ENV_ID, num_envs=2, vectorization_mode="async", blocks=2,
+                              control_mode="joint_position", placement=(0.02, 20))  # fmt: skip
+    try:
+        obs, info = envs.reset(seed=[3, 4])
+        assert obs["environment_state"].shape == (2, ENVIRONMENT_STATE_SIZE)
+        assert not np.array_equal(obs["cubes"][0], obs["cubes"][1])  # two episodes
+        pids = {p.pid for p in envs.processes}
+        assert len(pids) == 2 and os.getpid() not in pids
+        for _ in range(3):
+            obs, reward, terminated, truncated, info = envs.step(obs["state"][:, :8])
+        assert reward.shape == (2,) and np.all((reward >= 0) & (reward <= 1))
+    finally:
+        envs.close()

@@ -1,0 +1,127 @@
+"""Learning benchmark: the results table of the learning tasks, through the project's own
+commands (record, train, evaluate), on held-out seeds with 95 % Wilson intervals.
+
+For each task of ``models/scenarios/learning.yaml`` named in ``--tasks``:
+
+- ``expert``: the demonstrator (the task's ``!Policy``), evaluated;
+- ``random``: uniform random actions (``examples.random_policy:make``), the floor;
+- for each ``--policies`` x ``--demos``: ``record`` that many demonstrations (no cameras:
+  state policies), ``train`` the task's recipe with that LeRobot policy, ``evaluate`` the
+  checkpoint.
+
+Demonstrations use seeds 0, 1, 2, ...; every row is evaluated on the same ``--episodes``
+held-out seeds from ``--eval-seed`` (default 100000). Recordings and checkpoints are kept
+in ``--work`` and reused when the script runs again (delete a folder to redo it). Prints
+one row per policy: success, the interval, training minutes and steps/s, and the
+evaluation's episodes per minute.
+
+    python benchmarks/learning.py --tasks stack2 --demos 100 300 --policies act
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from machine import machine  # noqa: E402
+
+from cake_drake.learning.evaluation import wilson  # noqa: E402
+
+LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
+RANDOM = "examples.random_policy:make"
+
+
+def cake(command: str, *args: str) -> float:
+    """Run ``python -m cake_drake.COMMAND ARGS`` (stopping at a failure); its wall time (s)."""
+    t0 = time.perf_counter()
+    r = subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{command}", *args],
+        cwd=ROOT, capture_output=True, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    if r.returncode != 0:
+        sys.exit(f"python -m cake_drake.{command} {' '.join(args)} failed:\n{r.stderr[-2000:]}")
+    return time.perf_counter() - t0
+
+
+def evaluate(task: str, policy: str, out: Path, episodes: int, seed: int) -> dict:
+    summary = out / "summary.json"
+    if not summary.is_file():
+        args = ["--suite", str(LEARNING), "--name", task, "--episodes", str(episodes)]
+        wall = cake("evaluate", policy, *args, "--seed", str(seed), "--out", str(out))
+        data = json.loads(summary.read_text())
+        data["eval_wall_s"] = wall
+        summary.write_text(json.dumps(data))
+    return json.loads(summary.read_text())
+
+
+def trained(task: str, policy: str, demos: int, work: Path) -> tuple[Path, dict]:
+    """The checkpoint of ``policy`` on ``demos`` demonstrations of ``task`` (made if absent),
+    and the training's figures."""
+    data = work / f"{task}_demos{demos}"
+    if not (data / "meta" / "info.json").is_file():
+        cake("record", str(LEARNING), "--name", task, "--out", str(data), "--episodes",
+             str(demos), "--no-cameras")  # fmt: skip
+    run = work / f"{task}_{policy}_demos{demos}"
+    figures = run / "figures.json"
+    if not figures.is_file():
+        wall = cake("train", str(data), "--out", str(run), "--policy", policy, "--device", "cpu")
+        steps = json.loads((run / "train.json").read_text())["recipe"]["steps"]
+        figures.write_text(json.dumps({"train_s": wall, "steps": steps}))
+    return run, json.loads(figures.read_text())
+
+
+def row(name: str, s: dict, train: dict | None = None) -> str:
+    lo, hi = wilson(s["success"], s["episodes"])
+    per_min = s["episodes"] / s["eval_wall_s"] * 60
+    trained_text = (
+        f"{train['train_s'] / 60:6.1f} min {train['steps'] / train['train_s']:5.1f}/s"
+        if train
+        else f"{'-':>17}"
+    )
+    return (
+        f"  {name:<24} {s['success']:>3}/{s['episodes']:<3} {s['rate']:>5.0%}  "
+        f"[{lo:4.0%}, {hi:4.0%}]  {trained_text}  {per_min:5.1f} ep/min"
+    )
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--tasks", nargs="+", default=["stack2", "tower3", "tower5", "blocks3"])
+    p.add_argument("--demos", type=int, nargs="+", default=[100, 300])
+    p.add_argument("--policies", nargs="+", default=["act", "diffusion"])
+    p.add_argument("--episodes", type=int, default=50, help="held-out episodes per row")
+    p.add_argument("--eval-seed", type=int, default=100_000, help="the first held-out seed")
+    p.add_argument("--work", type=Path, default=ROOT / "outputs" / "learning_benchmark")
+    args = p.parse_args()
+    args.work.mkdir(parents=True, exist_ok=True)
+    print(machine())
+    print(f"held-out seeds {args.eval_seed}..{args.eval_seed + args.episodes - 1}")
+    print(f"  {'policy':<24} {'success':>7} {'rate':>6}  {'95 % interval':<13} "
+          f"{'training':>17}  {'evaluation':>10}")  # fmt: skip
+    for task in args.tasks:
+        print(task)
+        for name, policy in (("expert", None), ("random", RANDOM)):
+            from cake_drake.scenario import load_scenario
+
+            spec = policy or load_scenario(LEARNING, task).reference.factory
+            s = evaluate(task, spec, args.work / f"{task}_{name}", args.episodes, args.eval_seed)
+            print(row(name, s), flush=True)
+        for policy in args.policies:
+            for demos in args.demos:
+                run, figures = trained(task, policy, demos, args.work)
+                s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
+                print(row(f"{policy}, {demos} demos (state)", s, figures), flush=True)
+
+
+if __name__ == "__main__":
+    main()
