@@ -237,6 +237,7 @@ class StackEnv(gymnasium.Env):
         self._context = self._simulator.get_context()
         self._source_context = self._source.GetMyContextFromRoot(self._context)
         self._steps = 0
+        self._period_index = 0
         #: This episode's step budget: ``max_steps``, or (0) scaled to the classical plan.
         self.budget = spaces.step_budget(
             self.max_steps, len(plan.actions), self.rate_hz, self._periods
@@ -247,7 +248,10 @@ class StackEnv(gymnasium.Env):
         if self._simulator is None:
             raise RuntimeError("call reset() before step()")
         self._held.action = action
-        self._simulator.AdvanceTo(self._context.get_time() + self._periods / self.rate_hz)
+        # To the slot's next update time exactly as Drake computes it (k periods from 0):
+        # a sum of periods drifts off it, and the update would then observe a second time.
+        self._period_index += self._periods
+        self._simulator.AdvanceTo(self._period_index * (1.0 / self.rate_hz))
         self._steps += 1
         obs, info = self._observe()
         terminated = info["is_success"] or info["unrecoverable"]
