@@ -5,11 +5,13 @@ A dataset holds, per frame (one control period, ``fps`` = the policy rate):
 ``observation.environment_state`` (float32, 240: every cube's pose and the goal as numbers,
 the layout of :mod:`cake_drake.policy.observations`),
 ``observation.images.<camera>`` (video, H x W x 3, H.264 through PyAV's own FFmpeg),
-``action`` (float32, the control mode's: 8 for ``joint_position``, 7 for ``ee_delta``),
-and lerobot's own ``timestamp``, ``frame_index``, ``episode_index``, ``index`` and
-``task_index``; the task is the episode's English instruction. ``lerobot`` is an optional
-extra (``pip install 'cake_drake[lerobot]'``, about 8 GB with torch); without it the
-commands that need it are refused before any work.
+``action`` (float32, the control mode's: 8 for ``joint_position``, 7 for ``ee_delta``: the
+demonstrator's label, also where noise or a learner changed what ran), ``actor`` (int64:
+who acted, 0 the demonstrator, 1 a learner in DAgger's rollouts), and lerobot's own
+``timestamp``, ``frame_index``, ``episode_index``, ``index`` and ``task_index``; the task
+is the episode's English instruction. ``lerobot`` is an optional extra
+(``pip install 'cake_drake[lerobot]'``, about 8 GB with torch); without it the commands
+that need it are refused before any work.
 
 Nothing is fetched: the dataset is written and read under a local ``root``, with the
 Hugging Face hub set offline.
@@ -59,6 +61,10 @@ def require_lerobot() -> None:
                          f"{LEROBOT_PIP}") from None  # fmt: skip
 
 
+#: Who acted at a frame: 0 the demonstrator (or expert), 1 a learner.
+ACTOR = "actor"
+
+
 def features(control_mode: str, cameras) -> dict:
     """lerobot's feature table for episodes in ``control_mode`` with ``cameras``."""
     if control_mode not in ACTION_NAMES:
@@ -78,6 +84,7 @@ def features(control_mode: str, cameras) -> dict:
             "shape": (len(ACTION_NAMES[control_mode]),),
             "names": ACTION_NAMES[control_mode],
         },
+        ACTOR: {"dtype": "int64", "shape": (1,), "names": [ACTOR]},
     }
     for c in cameras:
         table[f"observation.images.{c.name}"] = {
@@ -133,11 +140,13 @@ def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  
     )
     frames = 0
     for ep in episodes:
+        actors = ep.actors if ep.actors is not None else np.zeros(len(ep.actions), np.int64)
         for k in range(len(ep.actions)):
             frame = {
                 "observation.state": ep.states[k],
                 "observation.environment_state": ep.environment[k],
                 "action": ep.actions[k],
+                ACTOR: np.asarray([actors[k]], np.int64),
                 "task": ep.task,
             }
             for name, video in ep.images.items():

@@ -7,8 +7,14 @@ successful ones then become one LeRobot dataset in ``OUT`` (``meta/``, ``data/``
 ``videos/``: :mod:`cake_drake.learning.dataset`), written in seed order whatever the
 workers, and ``OUT/report.json`` says what was recorded and why the others failed.
 
-``replay_check``: every episode's actions fed open loop through the same environment
-from the same seed; the fraction that builds the goal again.
+With ``spec.noise`` (DART) each executed action is the demonstrator's plus seeded noise
+(:func:`cake_drake.learning.rollout.noise_scale`); the dataset's ``action`` is the
+demonstrator's own, the label, and ``episodes/ep_SEED.npz`` keeps what ran as
+``executed``.
+
+``replay_check``: every episode's actions (a noisy recording's executed ones) fed open
+loop through the same environment from the same seed; the fraction that builds the goal
+again.
 """
 
 from __future__ import annotations
@@ -23,7 +29,15 @@ import numpy as np
 
 from cake_drake.errors import InputError, OutputError
 from cake_drake.learning.parallel import imap, map_ordered
-from cake_drake.learning.rollout import EXPERT, FRAMES, Episode, EpisodeSpec, replay, rollout
+from cake_drake.learning.rollout import (
+    EXPERT,
+    FRAMES,
+    Episode,
+    EpisodeSpec,
+    check_noise,
+    replay,
+    rollout,
+)
 
 RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 
@@ -72,15 +86,16 @@ def _record_one(args) -> Episode:
     return rollout(spec, seed, record=True)
 
 
-def _keep(ep: Episode, folder: Path) -> dict:
-    """Write a finished episode into the recording's ``episodes/`` (its frames when it
-    succeeded, whole by rename; its verdict always, last); its row."""
+def _keep(ep: Episode, folder: Path, failed_too: bool = False) -> dict:
+    """Write a finished episode into ``folder`` (its frames when it succeeded, or always
+    with ``failed_too``, whole by rename; its verdict always, last); its row."""
     row = {k: v for k, v in asdict(ep).items() if k not in FRAMES}
-    if ep.success and ep.actions is not None:
+    if (ep.success or failed_too) and ep.actions is not None:
         tmp = folder / f".ep_{ep.seed}.npz"
         with open(tmp, "wb") as f:
             np.savez(f, states=ep.states, actions=ep.actions, environment=ep.environment,
-                     task=ep.task, **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
+                     actors=ep.actors, executed=ep.executed, task=ep.task,
+                     **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
         os.replace(tmp, folder / f"ep_{ep.seed}.npz")
     _write_whole(folder / f"ep_{ep.seed}.json", json.dumps(row) + "\n")
     return row
@@ -107,12 +122,14 @@ def _finished(cache: Path) -> dict[int, dict]:
 
 
 #: What a resumed recording must share with the one it continues.
-SAME_FOR_RESUME = ("control_mode", "rate_hz", "cameras", "problem", "blocks", "placement")
+SAME_FOR_RESUME = (
+    "control_mode", "rate_hz", "cameras", "problem", "blocks", "placement", "noise",
+)  # fmt: skip
 
 
 def _check_resume(cache: Path, spec: EpisodeSpec, out: Path) -> None:
-    """Refuse to continue a recording made with another action space, rate, cameras or
-    task: one line naming what differs."""
+    """Refuse to continue a recording made with another action space, rate, cameras,
+    task or noise: one line naming what differs."""
     path = cache / "spec.json"
     if not path.is_file():
         return
@@ -121,6 +138,7 @@ def _check_resume(cache: Path, spec: EpisodeSpec, out: Path) -> None:
     except ValueError:
         return
     now = json.loads(json.dumps(_spec_json(spec)))
+    before.setdefault("noise", 0.0)  # recorded before noise was a field: none
     for key in SAME_FOR_RESUME:
         if key in before and before[key] != now[key]:
             raise InputError(
@@ -150,6 +168,8 @@ def record(
 
     dataset.require_lerobot()
     dataset.features(spec.control_mode, spec.cameras)  # a mode that cannot be recorded
+    if spec.noise:
+        check_noise(spec.noise, spec.control_mode)
     real = check_output_folder(out, "record", set(RECORD_OUTPUTS))
     cache = real / "episodes"
     if cache.is_dir() and any(cache.iterdir()) and not resume:
@@ -185,6 +205,7 @@ def record(
             "control_mode": spec.control_mode,
             "cameras": [c.name for c in spec.cameras],
             "policy": spec.policy,
+            "noise": spec.noise,
             "seeds": [r["seed"] for r in kept],
             "tried": len(rows),
             "failed": [
@@ -205,12 +226,19 @@ def record(
     return report
 
 
-def _load(path: Path, row: dict) -> Episode:
-    with np.load(path) as z:
-        images = {k[6:]: z[k] for k in z.files if k.startswith("image_")}
+def _load(path: Path, row: dict, images: bool = True) -> Episode:
+    """A kept episode (``_keep``'s npz and row); one kept before who acted was recorded
+    was the demonstrator's alone."""
+    with np.load(path, allow_pickle=False) as z:
+        frames = {k[6:]: z[k] for k in z.files if images and k.startswith("image_")}
+        actions = z["actions"]
+        has = set(z.files)
+        actors = z["actors"] if "actors" in has and z["actors"].shape else None
+        executed = z["executed"] if "executed" in has and z["executed"].shape else actions
         return Episode(
-            row["seed"], True, row["reason"], row["steps"], row["wall_s"], str(z["task"]),
-            row["blocks"], z["states"], z["environment"], z["actions"], images,
+            row["seed"], row["success"], row["reason"], row["steps"], row["wall_s"],
+            str(z["task"]), row["blocks"], z["states"], z["environment"], actions, frames,
+            np.zeros(len(actions), np.int64) if actors is None else actors, executed,
         )  # fmt: skip
 
 
@@ -249,6 +277,7 @@ def _spec_from_json(d: dict) -> EpisodeSpec:
         policy=d["policy"],
         options=d["options"],
         placement=tuple(d.get("placement", (0.0, 0.0))),
+        noise=float(d.get("noise", 0.0)),
     )
 
 
@@ -258,6 +287,15 @@ def _spec_from_json(d: dict) -> EpisodeSpec:
 def _replay_one(args) -> dict:
     spec, seed, actions = args
     return {"seed": seed, "rebuilt": replay(spec, seed, actions)}
+
+
+def _ran(root: Path, seed: int, report: dict) -> np.ndarray:
+    """What ran in a noisy recording's episode (its labels are the dataset's actions)."""
+    path = root / "episodes" / f"ep_{seed}.npz"
+    if not path.is_file():
+        raise InputError(f"{path}: missing; a noisy recording replays what ran, kept there")
+    with np.load(path, allow_pickle=False) as z:
+        return z["executed"]
 
 
 def replay_check(root: Path, workers: int) -> dict:
@@ -271,7 +309,8 @@ def replay_check(root: Path, workers: int) -> dict:
     data = dataset.read(root)
     spec = _spec_from_json(report["spec"])
     jobs = [
-        (spec, seed, dataset.episode_actions(data, k)) for k, seed in enumerate(report["seeds"])
+        (spec, seed, _ran(root, seed, report) if spec.noise else dataset.episode_actions(data, k))
+        for k, seed in enumerate(report["seeds"])
     ]
     rebuilt = [a["rebuilt"] for a in map_ordered(_replay_one, jobs, workers)]
     return {"episodes": len(jobs), "rebuilt": sum(rebuilt), "per_episode": rebuilt}

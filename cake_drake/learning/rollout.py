@@ -11,6 +11,17 @@ The episode's frames are what the policy saw and did: at each step the observati
 camera) and the action it answered, in the environment's control mode, then held for one
 control period. Replaying the actions from the same seed therefore rebuilds the same
 episode, up to the simulation's own determinism (bit for bit on one machine).
+
+Two teachers' variants of an episode (DART and DAgger) execute an action other than the
+one recorded; the recorded one is then the label, and ``executed`` what ran:
+
+- ``EpisodeSpec.noise`` (DART): the policy's action plus seeded Gaussian noise is executed
+  (:func:`noise_scale` gives its units per action space, :data:`NOISE_MAX` its bound).
+- a :class:`Teacher` (DAgger): the policy is a learner; the teacher answers every step on
+  the same observation, and its answer is the label; the teacher's action is executed
+  instead with probability ``beta``. Each frame records who acted (``actors``).
+
+The noise and the coin are drawn from the episode's seed: the same seed, the same noise.
 """
 
 from __future__ import annotations
@@ -20,12 +31,52 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cake_drake.errors import InputError
 from cake_drake.plugins import DURING, guarded
 
 #: The policy the recordings use unless another is named: the classical cake as a policy.
 EXPERT = "examples.expert_policy:make"
 #: Wall-clock budget of one answer of a policy plug-in (s).
 ACT_BUDGET_S = 30.0
+#: Who acted at a frame (the dataset's ``actor``): the labelling policy, or a learner.
+EXPERT_ACTED, LEARNER_ACTED = 0, 1
+#: The largest noise (``--noise``) each action space takes, in the units of
+#: :func:`noise_scale`: 0.1 rad a joint; 0.05 m, the ``ee_delta`` step's own bound.
+NOISE_MAX = {"joint_position": 0.1, "ee_delta": 0.05}
+#: Streams of the episode's seed: the executed action's noise, DAgger's coin.
+NOISE_STREAM, COIN_STREAM = 0xDA27, 0xDA66
+
+
+def noise_scale(control_mode: str) -> np.ndarray:
+    """The standard deviation, per action component, of noise of size 1: ``joint_position``
+    1 rad on each of the seven joints; ``ee_delta`` 1 m on dx, dy, dz and the rotations
+    scaled as their bounds are (0.25 rad per 0.05 m: 5 rad). The gripper is never noised."""
+    from cake_drake.policy.spaces import EE_STEP
+
+    if control_mode == "joint_position":
+        return np.r_[np.ones(7), 0.0]
+    if control_mode == "ee_delta":
+        return np.r_[np.ones(3), EE_STEP[3:] / EE_STEP[:3], 0.0]
+    raise InputError(
+        f"--noise: {control_mode} actions cannot be noised; choose one of: {', '.join(NOISE_MAX)}"
+    )
+
+
+def check_noise(sigma: float, control_mode: str) -> float:
+    """``sigma`` if it is noise ``control_mode`` takes; one line (exit 2) naming the bound
+    otherwise."""
+    unit = "rad on each joint" if control_mode == "joint_position" else "m"
+    noise_scale(control_mode)  # a space that cannot be noised
+    high = NOISE_MAX[control_mode]
+    if not (isinstance(sigma, int | float) and 0.0 <= sigma <= high):
+        raise InputError(
+            f"--noise {sigma!r}: from 0 to {high:g} ({unit}) for {control_mode} actions"
+        )
+    return float(sigma)
+
+
+def _stream(seed: int, stream: int) -> np.random.Generator:
+    return np.random.default_rng([seed % 2**32, stream])
 
 
 @dataclass(frozen=True)
@@ -41,6 +92,7 @@ class EpisodeSpec:
     policy: str = EXPERT
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
     placement: tuple[float, float] = (0.0, 0.0)  # world.placement: xy (m), yaw (degrees)
+    noise: float = 0.0  # DART: noise added to the executed action (units: noise_scale)
 
     def env(self):
         from cake_drake.learning.env import StackEnv
@@ -67,8 +119,19 @@ class EpisodeSpec:
         return {k: v for k, v in self.options.items() if k in ("horizon", "execute")}
 
 
+@dataclass(frozen=True)
+class Teacher:
+    """DAgger's labeller: the policy whose answer is recorded at every step while the
+    episode's own policy (a learner) acts, its action executed instead with probability
+    ``beta``."""
+
+    policy: str
+    options: dict = field(default_factory=dict)
+    beta: float = 0.0
+
+
 #: An episode's frame arrays (the rest of an :class:`Episode` is its row in a table).
-FRAMES = ("states", "environment", "actions", "images")
+FRAMES = ("states", "environment", "actions", "images", "actors", "executed")
 
 
 @dataclass
@@ -86,6 +149,8 @@ class Episode:
     environment: np.ndarray | None = None  # (T, 240) float32: observation.environment_state
     actions: np.ndarray | None = None  # (T, A) float32
     images: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (T, H, W, 3) uint8
+    actors: np.ndarray | None = None  # (T,) int64: EXPERT_ACTED or LEARNER_ACTED
+    executed: np.ndarray | None = None  # (T, A) float32: what ran (the label plus noise, ...)
 
 
 def _make_policy(spec: str, options: dict):
@@ -94,36 +159,72 @@ def _make_policy(spec: str, options: dict):
     return make_policy(spec, options)
 
 
+def _answer(policy, label: str, obs, spec: EpisodeSpec, kin, counts):
+    """``policy``'s answer to ``obs``: (its action checked and clipped, or None; done)."""
+    from cake_drake.policy import spaces
 
-def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
-    """Run the policy ``spec.policy`` for one episode of ``spec.env()`` reset with ``seed``."""
+    answer = guarded(label, policy.act, obs, exit_code=DURING, budget_s=ACT_BUDGET_S)
+    action, done = spaces.read_answer(answer, label)
+    if action is not None:
+        options = spec.action_options()
+        action = spaces.checked(
+            action, spec.control_mode, options, label, kin.lower, kin.upper, counts
+        ).astype(np.float32)
+    return action, done
+
+
+def rollout(
+    spec: EpisodeSpec, seed: int, record: bool = True, teacher: Teacher | None = None
+) -> Episode:
+    """Run the policy ``spec.policy`` for one episode of ``spec.env()`` reset with ``seed``;
+    with a ``teacher``, label every step with its answer (see the module)."""
     from cake_drake.geometric.ik import Kinematics
     from cake_drake.policy import spaces
 
     env = spec.env()
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
+    task = env.unwrapped.policy_task
     policy = _make_policy(spec.policy, spec.options)
     label = f"policy {spec.label!r}"
-    guarded(label, policy.reset, env.unwrapped.policy_task, seed, exit_code=DURING)
+    guarded(label, policy.reset, task, seed, exit_code=DURING)
+    if teacher is not None:
+        expert = _make_policy(teacher.policy, teacher.options)
+        expert_label = f"policy {teacher.policy!r}"
+        guarded(expert_label, expert.reset, task, seed, exit_code=DURING)
     kin = Kinematics()
     options, counts = spec.action_options(), spaces.Counts()
-    states, environment, actions = [], [], []
+    noise = spec.noise * noise_scale(spec.control_mode) if spec.noise else None
+    noise_rng, coin_rng = _stream(seed, NOISE_STREAM), _stream(seed, COIN_STREAM)
+    states, environment, actions, actors, executed = [], [], [], [], []
     images = {c.name: [] for c in spec.cameras}
-    reason, steps = "the policy said done", 0
+    reason, steps, ender = "the policy said done", 0, policy
     terminated = truncated = False
     while True:
-        answer = guarded(label, policy.act, obs, exit_code=DURING, budget_s=ACT_BUDGET_S)
-        action, done = spaces.read_answer(answer, label)
+        action, done = _answer(policy, label, obs, spec, kin, counts)
         if done and action is None:
             break
-        action = spaces.checked(
-            action, spec.control_mode, options, label, kin.lower, kin.upper, counts
-        ).astype(np.float32)
+        labelled, actor = action, EXPERT_ACTED
+        if teacher is not None:
+            labelled, expert_done = _answer(expert, expert_label, obs, spec, kin, counts)
+            if expert_done and labelled is None:
+                ender = expert
+                break
+            done = done or expert_done
+            if coin_rng.random() >= teacher.beta:
+                actor = LEARNER_ACTED
+            else:
+                action = labelled
+        if noise is not None:
+            action = action + noise * noise_rng.standard_normal(action.shape)
+            low, high = spaces.bounds(spec.control_mode, options, kin.lower, kin.upper)
+            action = np.clip(action, low, high).astype(np.float32)
         if record:
             states.append(np.asarray(obs["state"][:8], np.float32))
             environment.append(obs["environment_state"])
-            actions.append(action)
+            actions.append(labelled)
+            actors.append(actor)
+            executed.append(action)
             for name in images:
                 images[name].append(obs["images"][name])
         obs, _, terminated, truncated, info = env.step(action)
@@ -137,8 +238,8 @@ def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
     elif truncated:
         periods = spaces.periods(spec.control_mode, options)
         reason = spaces.budget_text(env.unwrapped.budget, spec.rate_hz, periods)
-    elif getattr(policy, "reason", None):  # a policy that says why it stopped
-        reason = f"the policy said done: {policy.reason}"
+    elif getattr(ender, "reason", None):  # a policy that says why it stopped
+        reason = f"the policy said done: {ender.reason}"
     ep = Episode(
         seed, bool(info["is_success"]), reason, steps, time.perf_counter() - t0,
         info["task"], len(info["cubes"]),
@@ -147,6 +248,7 @@ def rollout(spec: EpisodeSpec, seed: int, record: bool = True) -> Episode:
         ep.states, ep.actions = np.stack(states), np.stack(actions)
         ep.environment = np.stack(environment)
         ep.images = {k: np.stack(v) for k, v in images.items()}
+        ep.actors, ep.executed = np.asarray(actors, np.int64), np.stack(executed)
     return ep
 
 
