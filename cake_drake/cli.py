@@ -807,14 +807,23 @@ episodes failed. Episodes run on a local pool (--workers N) or on Ray (--ray: a 
 instance; --ray ADDRESS: a cluster); this process keeps each as it finishes, in
 --out/episodes/: an interrupted recording keeps them, and --resume records only the rest.
 
---replay DATASET feeds every episode's actions, open loop, through the same environment
-from the same seed and reports how many build the goal again.
+--noise SIGMA records noise-injected demonstrations (DART): the executed action is the
+demonstrator's plus Gaussian noise drawn from the episode's seed (the same seed, the same
+noise), the recorded action the demonstrator's own. Units: joint_position, SIGMA rad on
+each of the seven joints (at most 0.1); ee_delta, SIGMA m on dx, dy, dz and 5 SIGMA rad
+on the rotations (their bounds' ratio), SIGMA at most 0.05 (a step's bound); the gripper
+is never noised; joint_chunk is not recorded. Success is measured from the poses as ever:
+only episodes that reach the goal are kept. The noise is in report.json.
+
+--replay DATASET feeds every episode's actions (a noisy recording's executed ones), open
+loop, through the same environment from the same seed and reports how many build the
+goal again.
 
 Needs lerobot: pip install 'cake_drake[lerobot]'. Exit codes: 0 done; 2 bad input (no
 lerobot, a folder holding another recording without --resume, --resume with another
-action space, rate, cameras or task, an action space that cannot be recorded, a dataset
-missing a file); 3 a policy plug-in failed; 4 the dataset could not be written; 130
-interrupted (finished episodes are kept).
+action space, rate, cameras, task or noise, an action space that cannot be recorded,
+--noise negative, not a number or above its bound, a dataset missing a file); 3 a policy
+plug-in failed; 4 the dataset could not be written; 130 interrupted (finished episodes are kept).
 """
 
 
@@ -836,6 +845,13 @@ def record_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--workers", type=int, help="worker processes (default: cores)")
     _ray_flag(p)
+    p.add_argument(
+        "--noise",
+        type=float,
+        metavar="SIGMA",
+        help="DART: Gaussian noise on the executed action (joint_position: rad a joint; "
+        "ee_delta: m), the clean action recorded",
+    )
     p.add_argument("--resume", action="store_true", help="continue an interrupted recording")
     p.add_argument("--replay", type=Path, metavar="DATASET", help="replay a dataset's actions")
     return p
@@ -891,16 +907,21 @@ def main_record(argv: list[str] | None = None) -> int:
     spec = spec_from_scenario(scenario, args.policy)
     if args.no_cameras:
         spec = replace(spec, cameras=())
+    if args.noise is not None:
+        from cake_drake.learning.rollout import check_noise
+
+        spec = replace(spec, noise=check_noise(args.noise, spec.control_mode))
     seeds = [scenario.seed + k for k in range(args.episodes)]
     from dataclasses import asdict
 
     ray = _ray(args.ray, workers)
     training = asdict(scenario.training)
     report = record(spec, args.out, seeds, workers, args.resume, ray, args.name or "", training)
+    noise = f", noise {spec.noise:g}" if spec.noise else ""
     print(
         f"{args.out}: {report['episodes']}/{report['tried']} episodes recorded "
-        f"({report['frames']} frames at {report['fps']:g} Hz, {spec.control_mode}, cameras "
-        f"{', '.join(report['cameras']) or 'none'}); {len(report['failed'])} failed "
+        f"({report['frames']} frames at {report['fps']:g} Hz, {spec.control_mode}{noise}, "
+        f"cameras {', '.join(report['cameras']) or 'none'}); {len(report['failed'])} failed "
         "(listed in report.json)"
     )
     return EXIT_OK
@@ -1018,8 +1039,24 @@ a file. The checkpoint is LeRobot's (OUT/checkpoints/last/pretrained_model): eva
 with python -m cake_drake.evaluate OUT, or run it with reference: !Policy {checkpoint: OUT}.
 --resume continues OUT's training up to --steps.
 
+--dagger ROUNDS trains the recipe on DATASET, then each round rolls the checkpoint out for
+--episodes-per-round N episodes (default 10) of the recording's task (report.json's spec),
+on seeds after the recording's, on the local pool (--workers) or Ray (--ray), the expert's
+action executed instead with probability --beta B (default 0; drawn from the episode's
+seed); the recording's demonstrator (the closed-loop expert) labels every visited state,
+and an episode ends where it is done or the step budget runs out. Each round writes a new
+LeRobot dataset, OUT/data/round-K (the recording's kept episodes and every DAgger episode
+so far; a frame's actor is 0 where the expert acted, 1 where the learner did), and
+fine-tunes the last checkpoint on it for --round-steps steps (default: the recipe's).
+The last round's checkpoint is OUT's, as any training's; each training keeps its folder
+in OUT/rounds/round-K. Prints, per round, the episodes, the frames added, the
+expert-labelled frames in all and the learner's success in the round's rollouts. State
+policies only (--inputs state).
+
 Exit codes: 0 trained; 2 bad input (a dataset lacking what the policy needs, a device
-that is not here); 4 the checkpoint could not be written; 130 interrupted.
+that is not here, --dagger below 1, --beta outside 0 to 1, --dagger on a dataset with no
+task to roll a policy out on or no kept episodes, DAgger's flags without --dagger); 4 the
+checkpoint could not be written; 130 interrupted.
 """
 
 
@@ -1039,6 +1076,12 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--weights", help="a vision backbone's weights file (default: from scratch)")
     p.add_argument("--resume", action="store_true", help="continue OUT's last checkpoint")
+    p.add_argument("--dagger", type=int, metavar="ROUNDS", help="rounds of DAgger after training")
+    p.add_argument("--episodes-per-round", type=int, metavar="N", help="DAgger: rollouts a round")
+    p.add_argument("--beta", type=float, metavar="B", help="DAgger: P(the expert's action runs)")
+    p.add_argument("--round-steps", type=int, metavar="N", help="DAgger: fine-tuning steps")
+    p.add_argument("--workers", type=int, help="DAgger: rollout processes (default: cores)")
+    _ray_flag(p)
     return p
 
 
@@ -1058,12 +1101,47 @@ def main_train(argv: list[str] | None = None) -> int:
     recipe = replace(recipe, **{k: v for k, v in given.items() if v is not None})
     if args.weights is not None and not Path(args.weights).is_file():
         raise InputError(f"--weights {args.weights}: no such file")
+    dagger_only = {
+        "--episodes-per-round": args.episodes_per_round,
+        "--beta": args.beta,
+        "--round-steps": args.round_steps,
+        "--workers": args.workers,
+        "--ray": args.ray,
+    }
+    if args.dagger is not None:
+        return _main_dagger(args, recipe)
+    for flag, value in dagger_only.items():
+        if value is not None:
+            raise InputError(f"{flag} without --dagger: it is one of DAgger's settings")
     folder = train(
         args.dataset, args.out, recipe, args.device, args.seed, args.resume, args.weights
     )
     print(
         f"{args.out}: {recipe.policy} ({recipe.inputs}) trained {recipe.steps} steps on "
         f"{args.dataset}; checkpoint {folder}"
+    )
+    return EXIT_OK
+
+
+def _main_dagger(args: argparse.Namespace, recipe) -> int:
+    from cake_drake.learning.dagger import check_rounds, dagger, source
+
+    if args.resume:
+        raise InputError("--resume with --dagger: DAgger starts its folder afresh")
+    per_round = 10 if args.episodes_per_round is None else args.episodes_per_round
+    beta = 0.0 if args.beta is None else args.beta
+    check_rounds(args.dagger, per_round, beta, args.round_steps)
+    source(args.dataset)
+    workers = _workers(args.workers)
+    summary = dagger(
+        args.dataset, args.out, recipe, args.dagger, per_round, beta, args.device, args.seed,
+        workers, _ray(args.ray, workers), args.weights, args.round_steps,
+        log=lambda line: print(line, flush=True),
+    )  # fmt: skip
+    print(
+        f"{args.out}: {recipe.policy} ({recipe.inputs}) trained on {args.dataset} and "
+        f"{args.dagger} rounds of DAgger ({summary['dagger']['expert_labelled_frames']} "
+        f"expert-labelled frames); checkpoint {args.out}/checkpoints/last/pretrained_model"
     )
     return EXIT_OK
 

@@ -7,7 +7,10 @@ Nothing is fetched: the dataset is read from its folder, the hub is off, and vis
 backbones start from scratch unless a weights file is named. The checkpoint is LeRobot's
 layout (``OUT/checkpoints/last/pretrained_model``), which ``evaluate``, a run's
 ``!Policy {checkpoint: OUT}`` and the Gym env load through
-:mod:`cake_drake.learning.checkpoint`. ``resume`` continues ``OUT``'s last checkpoint.
+:mod:`cake_drake.learning.checkpoint`. ``resume`` continues ``OUT``'s last checkpoint;
+``pretrained`` starts from another's weights (lerobot's ``policy.pretrained_path``: a
+fine-tune, with the new dataset's normalisation), as DAgger's rounds do
+(:mod:`cake_drake.learning.dagger`).
 
 What a policy reads (``inputs``): ``state`` is ``observation.state`` and
 ``observation.environment_state`` (the cubes' poses and the goal), ``images`` the cameras
@@ -174,9 +177,10 @@ def train(
     resume: bool = False,
     weights: str | None = None,
     repo_id: str = datasets.REPO_ID,
+    pretrained: Path | None = None,
 ) -> Path:
     """Train ``recipe`` on the dataset at ``root`` into ``out`` with lerobot's own loop (see
-    the module); the checkpoint's folder."""
+    the module), from ``pretrained``'s weights when given; the checkpoint's folder."""
     from cake_drake.learning.checkpoint import device_for
 
     keys = check(root, out, recipe, device, resume)
@@ -203,6 +207,8 @@ def train(
         meta = LeRobotDatasetMetadata(repo_id, root=root)
         features = dataset_to_policy_features(meta.features)
         policy = _policy_config(recipe, where, weights)
+        if pretrained is not None:
+            policy.pretrained_path = Path(pretrained)
         policy.input_features = {k: features[k] for k in keys}
         policy.output_features = {"action": features["action"]}
         cfg = TrainPipelineConfig(

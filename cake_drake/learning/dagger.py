@@ -1,0 +1,250 @@
+"""DAgger: a policy trained on a recording, then rolled out, labelled by the expert, retrained.
+
+Imitation learning goes wrong on the states a learner drifts into, where no demonstration
+went (Ross et al. 2011). :func:`dagger` first trains the recipe on the recording (behaviour
+cloning, :func:`cake_drake.learning.train.train`), then, each round:
+
+1. rolls the current checkpoint out (:mod:`cake_drake.learning.checkpoint`) for
+   ``per_round`` episodes of the recording's task (``report.json``'s spec), on seeds after
+   every seed the recording tried, on the local pool or on Ray
+   (:func:`cake_drake.learning.parallel.imap`); at each step the expert's action is executed
+   instead with probability ``beta`` (a coin drawn from the episode's seed);
+2. labels every visited state with the recording's demonstrator (the closed-loop expert,
+   :mod:`cake_drake.learning.expert`, by default), asked at every step on the real
+   observation; an episode ends where the expert is done (the goal, or no plan from the
+   measured state), or where the task's step budget runs out;
+3. writes a new LeRobot dataset, ``OUT/data/round-K``: the recording's kept episodes
+   (``DATASET/episodes/ep_SEED.npz``) and every DAgger episode so far (kept in
+   ``OUT/rollouts/``), each frame's ``actor`` saying who acted (0 the expert, 1 the
+   learner), its ``action`` always the expert's label;
+4. fine-tunes the last checkpoint on it (lerobot's ``policy.pretrained_path``: the weights
+   carried on, the normalisation from the new dataset), ``round_steps`` steps.
+
+Each training has its folder in ``OUT/rounds/round-K`` (round 0: the behaviour cloning);
+the last round's checkpoints are copied to ``OUT/checkpoints``, the usual place, which
+``evaluate``, a run's ``!Policy {checkpoint: OUT}`` and the Gym env load as any training's.
+``OUT/train.json`` keeps the recipe and one row per round.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import shutil
+import sys
+from collections.abc import Callable
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from cake_drake.errors import InputError
+from cake_drake.learning.parallel import imap
+from cake_drake.learning.rollout import LEARNER_ACTED, EpisodeSpec, Teacher, rollout
+from cake_drake.scenario import Training
+
+#: What DAgger writes in its output folder.
+DAGGER_OUTPUTS = ("checkpoints", "train.json", "rounds", "data", "rollouts")
+
+
+def check_rounds(rounds: int, per_round: int, beta: float, round_steps: int | None) -> None:
+    """DAgger's own numbers, refused in one line (exit 2) before any work."""
+    if not (isinstance(rounds, int) and 1 <= rounds <= 1000):
+        raise InputError(f"--dagger {rounds}: rounds of DAgger, from 1 to 1000")
+    if not (isinstance(per_round, int) and 1 <= per_round <= 100_000):
+        raise InputError(f"--episodes-per-round {per_round}: from 1 to 100000")
+    if not (isinstance(beta, int | float) and math.isfinite(beta) and 0.0 <= beta <= 1.0):
+        raise InputError(
+            f"--beta {beta}: the probability that the expert's action runs, from 0 to 1"
+        )
+    if round_steps is not None and not 1 <= round_steps <= 10_000_000:
+        raise InputError(f"--round-steps {round_steps}: a whole number, 1 to 10000000")
+
+
+def source(root: Path) -> tuple[dict, EpisodeSpec, list[Path]]:
+    """The recording DAgger starts from: its report, the task its episodes ran on, and its
+    kept episodes' files. One line (exit 2) where there is no task to roll a policy out on
+    or no episodes to append to."""
+    from cake_drake.learning.recording import _spec_from_json
+
+    root = Path(root)
+    need = "as python -m cake_drake.record writes them"
+    path = root / "report.json"
+    try:
+        report = json.loads(path.read_text())
+        spec = _spec_from_json(report["spec"])
+        seeds = [int(s) for s in report["seeds"]]
+    except FileNotFoundError:
+        raise InputError(
+            f"{path}: missing; --dagger rolls the policy out on the recording's task, "
+            f"named there ({need})"
+        ) from None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        raise InputError(
+            f"{path}: names no task (spec) and seeds to roll a policy out on; --dagger "
+            f"needs a recording {need}"
+        ) from None
+    files = [root / "episodes" / f"ep_{s}.npz" for s in seeds]
+    gone = [f for f in files if not f.is_file()]
+    if not files or gone:
+        where = gone[0] if gone else root / "episodes"
+        raise InputError(
+            f"{where}: missing; --dagger appends to the recording's kept episodes "
+            f"(episodes/ep_SEED.npz, {need})"
+        )
+    return report, spec, files
+
+
+def _rollout_one(args):
+    """One DAgger episode (in a worker): the learner acts, the teacher labels."""
+    spec, seed, teacher, threads = args
+    if threads:
+        import torch
+
+        torch.set_num_threads(threads)
+    return rollout(spec, seed, record=True, teacher=teacher)
+
+
+def _row(npz: Path, seed: int) -> dict:
+    """A kept episode's verdict (its ``ep_SEED.json``; a success where it is unreadable:
+    only successes keep their frames)."""
+    try:
+        return json.loads(npz.with_suffix(".json").read_text())
+    except (OSError, ValueError):
+        return {"seed": seed, "success": True, "reason": "goal reached", "steps": 0,
+                "wall_s": 0.0, "blocks": 0}  # fmt: skip
+
+
+def _episodes(paths: list[Path], rows: list[dict]):
+    from cake_drake.learning.recording import _load
+
+    for path, row in zip(paths, rows, strict=True):
+        yield _load(path, row, images=False)
+
+
+def dagger(
+    root: Path,
+    out: Path,
+    recipe: Training,
+    rounds: int,
+    per_round: int,
+    beta: float = 0.0,
+    device: str = "auto",
+    seed: int = 0,
+    workers: int = 1,
+    ray=None,
+    weights: str | None = None,
+    round_steps: int | None = None,
+    log: Callable[[str], None] = print,
+) -> dict:
+    """Behaviour cloning on the recording at ``root``, then ``rounds`` of DAgger into
+    ``out`` (see the module); its summary (``out/train.json``)."""
+    from cake_drake.learning import dataset
+    from cake_drake.learning import train as training
+    from cake_drake.learning.recording import _keep, _write_whole
+    from cake_drake.pipeline import CHECKPOINT_POLICY
+
+    root, out = Path(root), Path(out)
+    check_rounds(rounds, per_round, beta, round_steps)
+    report, spec, demo_files = source(root)
+    training.check(root, out, recipe, device, False)
+    if recipe.inputs != "state":
+        raise InputError(
+            f"--dagger with --inputs {recipe.inputs}: DAgger's rollouts record no images; "
+            "train with --inputs state"
+        )
+    dataset.require_lerobot()
+    demo_rows = [_row(f, s) for f, s in zip(demo_files, report["seeds"], strict=True)]
+    tried = [int(s) for s in report["seeds"]] + [int(f["seed"]) for f in report.get("failed", [])]
+    first = max(tried) + 1
+    (out / "rounds").mkdir(parents=True, exist_ok=True)
+    (out / "rollouts").mkdir(exist_ok=True)
+    with contextlib.redirect_stdout(sys.stderr):  # lerobot's own lines: not the rounds'
+        checkpoint = training.train(root, out / "rounds" / "round-0", recipe, device, seed,
+                                    weights=weights)  # fmt: skip
+    labelled = int(report["frames"])
+    log(f"round 0: {recipe.policy} trained {recipe.steps} steps on {len(demo_files)} "
+        f"demonstrations ({labelled} expert-labelled frames)")  # fmt: skip
+    teacher = Teacher(spec.policy, dict(spec.options), float(beta))
+    threads = 1 if (ray is not None or workers > 1) else 0
+    kept_files, kept_rows, table, by_learner = [], [], [], 0
+    for k in range(1, rounds + 1):
+        learner = replace(
+            spec,
+            policy=CHECKPOINT_POLICY,
+            options={**spec.action_options(), "path": str(checkpoint.resolve()),
+                     "device": device},
+            cameras=(),
+            noise=0.0,
+        )  # fmt: skip
+        seeds = [first + (k - 1) * per_round + j for j in range(per_round)]
+        jobs = [(learner, s, teacher, threads) for s in seeds]
+        rows = {}
+        for ep in imap(_rollout_one, jobs, workers, ray):
+            rows[ep.seed] = (_keep(ep, out / "rollouts", failed_too=True), ep)
+        added = learner_frames = wins = 0
+        for s in seeds:
+            row, ep = rows[s]
+            wins += bool(row["success"])
+            if ep.actions is None:  # the expert was done before any step
+                continue
+            kept_files.append(out / "rollouts" / f"ep_{s}.npz")
+            kept_rows.append(row)
+            added += len(ep.actions)
+            learner_frames += int(np.sum(ep.actors == LEARNER_ACTED))
+        labelled += added
+        by_learner += learner_frames
+        data = out / "data" / f"round-{k}"
+        frames = dataset.write(
+            data,
+            _episodes(demo_files + kept_files, demo_rows + kept_rows),
+            spec.rate_hz,
+            spec.control_mode,
+            (),
+        )
+        _write_whole(data / "report.json", json.dumps({
+            **report,
+            "episodes": len(demo_files) + len(kept_files),
+            "frames": frames,
+            "cameras": [],
+            "dagger": {"round": k, "beta": beta, "learner_frames": by_learner,
+                       "seeds": [r["seed"] for r in kept_rows]},
+        }, indent=2) + "\n")  # fmt: skip
+        steps = round_steps or recipe.steps
+        with contextlib.redirect_stdout(sys.stderr):
+            checkpoint = training.train(data, out / "rounds" / f"round-{k}",
+                                        replace(recipe, steps=steps), device, seed + k,
+                                        pretrained=checkpoint)  # fmt: skip
+        line = {
+            "round": k,
+            "episodes": per_round,
+            "frames_added": added,
+            "learner_frames": learner_frames,
+            "expert_labelled_frames": labelled,
+            "learner_success": wins,
+            "seeds": seeds,
+            "steps": steps,
+        }
+        table.append(line)
+        log(f"round {k}: {per_round} episodes, {added} frames added ({learner_frames} by "
+            f"the learner, {added - learner_frames} by the expert), {labelled} "
+            f"expert-labelled frames in all; the learner's rollouts reached the goal in "
+            f"{wins}/{per_round} (beta {beta:g}); fine-tuned {steps} steps")  # fmt: skip
+    shutil.copytree(out / "rounds" / f"round-{rounds}" / "checkpoints", out / "checkpoints",
+                    symlinks=True)  # fmt: skip
+    summary = {
+        "dataset": str(root),
+        "recipe": asdict(recipe),
+        "seed": seed,
+        "dagger": {
+            "rounds": table,
+            "beta": beta,
+            "episodes_per_round": per_round,
+            "round_steps": round_steps or recipe.steps,
+            "data": str(out / "data" / f"round-{rounds}"),
+            "expert_labelled_frames": labelled,
+        },
+    }
+    (out / "train.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
