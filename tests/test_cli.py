@@ -26,13 +26,14 @@ def test_an_unknown_command_is_one_line_and_exit_2(capsys):
 
 def test_the_library_never_imports_the_cli():
     root = Path(__file__).resolve().parent.parent / "cake_drake"
-    thin = {"run", "plan", "validate", "saycan", "sweep", "record", "evaluate", "cli", "__main__"}
-    thin = {f"{name}.py" for name in thin}
+    thin = {"run", "plan", "validate", "saycan", "sweep", "record", "evaluate", "train", "cli"}
+    thin = {f"{name}.py" for name in thin} | {"__main__.py"}  # the top-level entry modules
     offenders = [
         str(p.relative_to(root))
         for p in root.rglob("*.py")
-        if p.name not in thin and ("cake_drake.cli" in p.read_text() or "argparse" in p.read_text())
-    ]
+        if str(p.relative_to(root)) not in thin and p.name != "__main__.py"
+        and ("cake_drake.cli" in p.read_text() or "argparse" in p.read_text())
+    ]  # fmt: skip
     assert not offenders, offenders
 
 
