@@ -16,6 +16,15 @@ one row per policy: success, the interval, training minutes and steps/s, and the
 evaluation's episodes per minute.
 
     python benchmarks/learning.py --tasks stack2 --demos 100 300 --policies act
+
+``--compare``: BC, DART and DAgger at equal numbers of expert-labelled frames, per task.
+DAgger records ``--start-demos`` demonstrations and runs ``--rounds`` rounds of
+``--per-round`` rollouts (``train --dagger``, ``--beta``); BC then trains on the first
+plain demonstrations, and DART on the first noisy ones (``record --noise``), whose frames
+reach DAgger's expert-labelled frames (from a pool of ``--pool`` recorded episodes each).
+Prints each row's frames and its success on the held-out seeds with the interval.
+
+    python benchmarks/learning.py --compare --tasks tower5 blocks3 --policies act
 """
 
 from __future__ import annotations
@@ -80,6 +89,89 @@ def trained(task: str, policy: str, demos: int, work: Path) -> tuple[Path, dict]
     return run, json.loads(figures.read_text())
 
 
+def recorded(task: str, episodes: int, work: Path, noise: float = 0.0) -> Path:
+    """A recording of ``episodes`` episodes of ``task`` (made if absent), noised or not."""
+    name = f"{task}_demos{episodes}" + (f"_noise{noise:g}" if noise else "")
+    data = work / name
+    if not (data / "meta" / "info.json").is_file():
+        extra = ["--noise", str(noise)] if noise else []
+        cake("record", str(LEARNING), "--name", task, "--out", str(data), "--episodes",
+             str(episodes), "--no-cameras", *extra)  # fmt: skip
+    return data
+
+
+def first_frames(pool: Path, frames: int, out: Path) -> dict:
+    """A dataset at ``out`` of ``pool``'s first kept episodes whose frames reach ``frames``
+    (all of them when they do not); its report."""
+    from cake_drake.learning import dataset
+    from cake_drake.learning.recording import _load
+
+    if (out / "report.json").is_file():
+        return json.loads((out / "report.json").read_text())
+    report = json.loads((pool / "report.json").read_text())
+    rows, total = [], 0
+    for seed in report["seeds"]:
+        if total >= frames:
+            break
+        row = json.loads((pool / "episodes" / f"ep_{seed}.json").read_text())
+        rows.append(row)
+        total += row["steps"]
+    episodes = (_load(pool / "episodes" / f"ep_{r['seed']}.npz", r, images=False) for r in rows)
+    written = dataset.write(out, episodes, report["fps"], report["control_mode"], ())
+    seeds = [r["seed"] for r in rows]
+    report = {**report, "episodes": len(rows), "frames": written, "seeds": seeds, "cameras": []}
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    return report
+
+
+def train_once(data: Path, run: Path, policy: str, *flags: str) -> dict:
+    """``train`` (made if absent); its wall time and the train.json it wrote."""
+    figures = run / "figures.json"
+    if not figures.is_file():
+        wall = cake("train", str(data), "--out", str(run), "--policy", policy, "--device",
+                    "cpu", *flags)  # fmt: skip
+        figures.write_text(json.dumps({"train_s": wall}))
+    return {**json.loads(figures.read_text()), **json.loads((run / "train.json").read_text())}
+
+
+def compare(task: str, policy: str, args) -> None:
+    """BC, DART and DAgger rows of ``task`` at equal expert-labelled frames."""
+    steps = ["--steps", str(args.steps)] if args.steps else []
+    start = recorded(task, args.start_demos, args.work)
+    run = args.work / (
+        f"{task}_{policy}_dagger{args.start_demos}x{args.rounds}x{args.per_round}"
+        f"_beta{args.beta:g}_steps{args.steps or 'recipe'}"
+    )
+    flags = ["--dagger", str(args.rounds), "--episodes-per-round", str(args.per_round),
+             "--beta", str(args.beta)]  # fmt: skip
+    figures = train_once(start, run, policy, *steps, *flags)
+    frames = figures["dagger"]["expert_labelled_frames"]
+    dagger = f"{args.start_demos} demos + {args.rounds} x {args.per_round}, beta {args.beta:g}"
+    runs = []
+    for label, noise in (("BC", 0.0), ("DART", args.noise)):
+        pool = recorded(task, args.pool, args.work, noise)
+        tag = f"{task}_{label.lower()}{noise:g}_frames{frames}"
+        data = args.work / f"{tag}_data"
+        report = first_frames(pool, frames, data)
+        trained_run = args.work / f"{tag}_{policy}_steps{args.steps or 'recipe'}"
+        extra = f"{report['episodes']} demos" + (f", noise {noise:g}" if noise else "")
+        if report["frames"] < frames:
+            extra += f" (all the pool has: --pool {args.pool} is short)"
+        runs.append((label, trained_run, report["frames"], train_once(data, trained_run, policy,
+                     *steps), extra))  # fmt: skip
+    runs.append(("DAgger", run, frames, figures, dagger))
+    for label, trained_run, labelled, made, extra in runs:
+        s = evaluate(task, str(trained_run), trained_run / "evaluation", args.episodes,
+                     args.eval_seed)  # fmt: skip
+        lo, hi = wilson(s["success"], s["episodes"])
+        print(
+            f"  {label + ', ' + policy:<14} {labelled:>7} frames  {s['success']:>3}/"
+            f"{s['episodes']:<3} {s['rate']:>5.0%}  [{lo:4.0%}, {hi:4.0%}]  "
+            f"train {made['train_s'] / 60:5.1f} min  {extra}",
+            flush=True,
+        )
+
+
 def row(name: str, s: dict, train: dict | None = None) -> str:
     lo, hi = wilson(s["success"], s["episodes"])
     per_min = s["episodes"] / s["eval_wall_s"] * 60
@@ -102,10 +194,26 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=50, help="held-out episodes per row")
     p.add_argument("--eval-seed", type=int, default=100_000, help="the first held-out seed")
     p.add_argument("--work", type=Path, default=ROOT / "outputs" / "learning_benchmark")
+    p.add_argument("--compare", action="store_true", help="BC, DART, DAgger at equal labels")
+    p.add_argument("--start-demos", type=int, default=20, help="DAgger's demonstrations")
+    p.add_argument("--rounds", type=int, default=4, help="DAgger's rounds")
+    p.add_argument("--per-round", type=int, default=20, help="DAgger's rollouts a round")
+    p.add_argument("--beta", type=float, default=0.3, help="DAgger: P(the expert's action)")
+    p.add_argument("--noise", type=float, default=0.005, help="DART's noise (rad a joint)")
+    p.add_argument("--pool", type=int, default=300, help="episodes recorded for BC and DART")
+    p.add_argument("--steps", type=int, help="training steps (default: the task's recipe)")
     args = p.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     print(machine())
     print(f"held-out seeds {args.eval_seed}..{args.eval_seed + args.episodes - 1}")
+    if args.compare:
+        print(f"  {'method':<14} {'labelled':>13}  {'success':>7} {'rate':>5}  "
+              f"{'95 % interval':<13}")  # fmt: skip
+        for task in args.tasks:
+            print(task)
+            for policy in args.policies:
+                compare(task, policy, args)
+        return
     print(f"  {'policy':<24} {'success':>7} {'rate':>6}  {'95 % interval':<13} "
           f"{'training':>17}  {'evaluation':>10}")  # fmt: skip
     for task in args.tasks:
