@@ -35,7 +35,7 @@ from cake_drake.errors import InputError
 from cake_drake.plugins import DURING, guarded
 
 #: The policy the recordings use unless another is named: the classical cake as a policy.
-EXPERT = "examples.expert_policy:make"
+EXPERT = "cake_drake.learning.expert:make"
 #: Wall-clock budget of one answer of a policy plug-in (s).
 ACT_BUDGET_S = 30.0
 #: Who acted at a frame (the dataset's ``actor``): the labelling policy, or a learner.
