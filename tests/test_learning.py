@@ -253,19 +253,30 @@ def test_a_checkpoint_acts_in_evaluate_a_run_and_the_gym_env(trained, tmp_path):
         obs, *_ = env.step(action)
 
 
+#: docs/learning.md shows this command; the test runs it verbatim (a small network).
+LEROBOT_TRAIN = (
+    "lerobot-train --dataset.repo_id=cake_drake/stack2 --dataset.root=stack2_demos "
+    "--dataset.video_backend=pyav --policy.type=act --policy.pretrained_backbone_weights=null "
+    "--policy.push_to_hub=false --policy.device=cpu --policy.dim_model=64 "
+    "--policy.dim_feedforward=128 --steps=2 --batch_size=2 --output_dir=stack2_lerobot"
+)
+
+
 @pytest.mark.slow
 def test_plain_lerobot_train_trains_on_a_recording(trained, tmp_path):
-    exe = Path(sys.executable).parent / "lerobot-train"
-    r = subprocess.run(
-        [str(exe), "--dataset.repo_id=cake_drake/stack2", f"--dataset.root={trained / 'ds'}",
-         "--dataset.video_backend=pyav", "--policy.type=act",
-         "--policy.pretrained_backbone_weights=null", "--policy.push_to_hub=false",
-         "--policy.device=cpu", "--policy.dim_model=64", "--policy.dim_feedforward=128",
-         "--steps=2", "--batch_size=2", "--num_workers=0", f"--output_dir={tmp_path / 'o'}"],
-        capture_output=True, text=True, timeout=600, env={**os.environ, "HF_HUB_OFFLINE": "1"},
-    )  # fmt: skip
+    import shlex
+
+    shutil.copytree(trained / "ds", tmp_path / "stack2_demos")
+    argv = shlex.split(LEROBOT_TRAIN)
+    argv[0] = str(Path(sys.executable).parent / argv[0])
+    r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                       env={**os.environ, "HF_HUB_OFFLINE": "1"})  # fmt: skip
     assert r.returncode == 0, r.stderr[-2000:]
-    assert (tmp_path / "o" / "checkpoints" / "last" / "pretrained_model" / "config.json").is_file()
+    model = tmp_path / "stack2_lerobot" / "checkpoints" / "last" / "pretrained_model"
+    assert (model / "config.json").is_file()
+    from cake_drake.learning.checkpoint import check_folder
+
+    check_folder(tmp_path / "stack2_lerobot", "joint_position", "cpu")  # evaluate takes it
 
 
 # --- bad input: one line, exit 2 -------------------------------------------------------------
@@ -434,3 +445,56 @@ def test_make_vec_runs_the_environment_in_two_processes():
         assert reward.shape == (2,) and np.all((reward >= 0) & (reward <= 1))
     finally:
         envs.close()
+
+
+#: A policy that builds the goal and never says done: the classical expert, its "done" cut.
+SILENT = """
+from cake_drake.learning.expert import make as expert
+
+
+class Silent:
+    def __init__(self):
+        self.expert, self.last = expert(), None
+
+    def reset(self, task, seed):
+        self.expert.reset(task, seed)
+
+    def act(self, obs):
+        answer = self.expert.act(obs)
+        action = answer[0] if isinstance(answer, tuple) else answer
+        self.last = self.last if action is None else action
+        return self.last
+
+
+def make():
+    return Silent()
+"""
+
+
+@pytest.mark.slow
+def test_a_run_ends_when_the_goal_holds_released_and_a_held_cube_is_not_on(tmp_path):
+    """A learned policy never says done: its run ends when the measured world shows the
+    goal, the cube let go (as the Gym episode does), long before the step budget."""
+    (tmp_path / "silent.py").write_text(SILENT)
+    (tmp_path / "s.yaml").write_text(
+        "task: {problem: package://cake_drake/pddl/stack2.pddl}\n"
+        "reference: !Policy {factory: 'silent:make', max_steps: 2000}\n"
+        "outputs: {render: false}\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--scenario", "s.yaml", "--out", "o"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=600,
+        env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    policy = json.loads((tmp_path / "o" / "summary.json").read_text())["policy"]
+    assert policy["steps"] < 600 and policy["ended"] is None
+    from pydrake.math import RigidTransform
+
+    from cake_drake.systems.policy_source import goal_progress
+
+    on_b = {"a": RigidTransform([0.5, 0.0, 0.06]), "b": RigidTransform([0.5, 0.0, 0.02])}
+    goal = frozenset({("on", "a", "b"), ("on-table", "b")})
+    assert goal_progress(on_b, 0.04, goal).reached  # open hand, far away
+    held = RigidTransform([0.5, 0.0, 0.06])  # the grasp frame at a's centre, fingers on it
+    assert not goal_progress(on_b, 0.019, goal, held).reached

@@ -46,7 +46,6 @@ from gymnasium import spaces as gs
 from pydrake.systems.analysis import Simulator
 
 from cake_drake.errors import InputError
-from cake_drake.execution import STACK_TOL
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, MAX_CUBES
 from cake_drake.world.cameras import Camera, default_cameras
@@ -228,7 +227,7 @@ class StackEnv(gymnasium.Env):
             scenario, checked.problem, initial, plan.actions, slots=slots, policy=self._held
         )
         self._view = view
-        self._goal_on = [f for f in view.goal if f[0] == "on"]
+        self._goal = frozenset(view.goal)
         self._source = self._cake.reference.policy
         #: What a policy is told at its reset (a policy that plans reads the problem here).
         self.policy_task = self._source.task
@@ -275,8 +274,6 @@ class StackEnv(gymnasium.Env):
     # --- what the agent sees ------------------------------------------------------------
 
     def _observe(self):
-        from cake_drake.world.facts import read_facts, stack_offsets
-
         # The slot's own observation of this period: the policy's update at this time
         # reads the same object, so each camera renders once a step.
         o = self._source.observe(self._source_context)
@@ -291,18 +288,11 @@ class StackEnv(gymnasium.Env):
             obs["environment_state"] = o["observation.environment_state"]
         if "rgb" in self.obs_mode:
             obs["images"] = {c.name: o[f"observation.images.{c.name}"] for c in self.cameras}
-        poses = o.cube_poses
-        reading = read_facts(poses, finger_opening=o.finger)
-        goal = self._view.goal
-        true = goal & reading.facts
-        loose = False
-        if any(f in true for f in self._goal_on):
-            offsets = stack_offsets(poses, reading.facts)
-            loose = any(offsets.get(f[1], 0.0) > STACK_TOL for f in self._goal_on if f in true)
+        progress = self._source.progress(o)  # the slot's reading: once per observation
         info = {
-            "reward": len(true) / len(goal) if goal else 1.0,
-            "is_success": bool(true == goal and not loose),
-            "unrecoverable": any(X.translation()[2] < -0.05 for X in poses.values()),
+            "reward": progress.reward(self._goal),
+            "is_success": progress.reached,
+            "unrecoverable": progress.lost,
             "task": o["task"],
             "goal": o["goal"],
             "cubes": o["cubes"],

@@ -63,12 +63,46 @@ class PolicyTask:
     rate_hz: float = 10.0
     options: dict | None = None
     goal_table: np.ndarray | None = None  # (12, 13): the goal as numbers (observations.py)
+    goal_facts: frozenset = frozenset()  # the goal in the world's canonical facts
 
     def __post_init__(self) -> None:
-        if self.goal_table is None and self.problem is not None:
+        if self.problem is not None:
             from cake_drake.symbolic.roles import blocksworld_view
 
-            self.goal_table = goal_table(self.cubes, blocksworld_view(self.problem).goal)
+            self.goal_facts = frozenset(blocksworld_view(self.problem).goal)
+            if self.goal_table is None:
+                self.goal_table = goal_table(self.cubes, self.goal_facts)
+
+
+@dataclass(frozen=True)
+class GoalProgress:
+    """The goal as the measured world shows it: the goal facts that hold, whether all of
+    them do with every stacked cube within tolerance, whether a cube has left the table."""
+
+    true: frozenset
+    reached: bool
+    lost: bool
+
+    def reward(self, goal: frozenset) -> float:
+        return len(self.true) / len(goal) if goal else 1.0
+
+
+def goal_progress(poses, finger: float, goal: frozenset, X_WG=None) -> GoalProgress:
+    """:class:`GoalProgress` from the cubes' poses, a finger's opening and the grasp frame
+    (the verdict's reading: facts as the monitor reads them, a cube still in the hand on
+    nothing, stacks within ``STACK_TOL``)."""
+    from cake_drake.execution import STACK_TOL
+    from cake_drake.world.facts import read_facts, stack_offsets
+
+    reading = read_facts(poses, X_WG=X_WG, finger_opening=finger)
+    true = goal & reading.facts
+    stacked = [f for f in goal if f[0] == "on" and f in true]
+    loose = False
+    if stacked:
+        offsets = stack_offsets(poses, reading.facts)
+        loose = any(offsets.get(f[1], 0.0) > STACK_TOL for f in stacked)
+    lost = any(X.translation()[2] < -0.05 for X in poses.values())
+    return GoalProgress(frozenset(true), bool(true == goal and not loose), lost)
 
 
 class PolicySource(LeafSystem):
@@ -88,8 +122,12 @@ class PolicySource(LeafSystem):
         q_start: np.ndarray,
         cameras: Sequence[str],
         task: PolicyTask,
+        stop_at_goal: bool = True,
     ) -> None:
         super().__init__()
+        #: End the policy's run when the measured world shows the goal (as the Gym env's
+        #: episode ends), so a policy that never says done is judged on what it built.
+        self.stop_at_goal = stop_at_goal
         self.policy, self.label, self.space, self.options = policy, label, space, dict(options)
         self.max_steps, self.world, self.ik, self.limits = max_steps, world, ik, limits
         self.task = task
@@ -177,6 +215,14 @@ class PolicySource(LeafSystem):
         self._observed = (key, obs)
         return obs
 
+    def progress(self, obs: Observation) -> GoalProgress:
+        """How much of the goal the world in ``obs`` shows (read once per observation)."""
+        found = getattr(obs, "progress", None)
+        if found is None:
+            found = goal_progress(obs.cube_poses, obs.finger, self.task.goal_facts, obs.X_WG)
+            obs.progress = found
+        return found
+
     # --- one step -----------------------------------------------------------------------
 
     def _update(self, context, state) -> None:
@@ -188,6 +234,9 @@ class PolicySource(LeafSystem):
             return
         if not self._chunk:
             obs = self.observe(context)
+            if self.stop_at_goal and self.task.goal_facts and self.progress(obs).reached:
+                self.done = True  # the goal holds: the run's verdict reads it
+                return
             answer = guarded(
                 self.label, self.policy.act, obs, exit_code=DURING, budget_s=self._budget_s
             )
@@ -222,12 +271,8 @@ class PolicySource(LeafSystem):
             self._written = held
             self._desired[:7] = self._q
             self._fingers[:2] = self._width / 2
-            state.get_mutable_discrete_state(self._groups["desired_state"]).set_value(
-                self._desired
-            )
-            state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(
-                self._fingers
-            )
+            state.get_mutable_discrete_state(self._groups["desired_state"]).set_value(self._desired)
+            state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(self._fingers)
         self._count[0] = self.steps
         self._labels[1] = self.steps - 1
         state.get_mutable_discrete_state(self._groups["actions_done"]).set_value(self._count)
