@@ -146,9 +146,10 @@ def bounds(name: str, options: dict, lower, upper) -> tuple[np.ndarray, np.ndarr
     return low, high
 
 
-def checked(action, name: str, options: dict, label: str, lower, upper, counts: Counts):
+def checked(action, name: str, options: dict, label: str, lower, upper, counts: Counts, box=None):
     """The action as a float array of the space's shape, clipped to its bounds (counted);
-    one line naming the policy when it is not an array of that shape of finite numbers."""
+    one line naming the policy when it is not an array of that shape of finite numbers.
+    ``box``: the space's (low, high), when the caller keeps them (:func:`bounds`)."""
     want = shape(name, options)
     try:
         if isinstance(action, dict | str | bytes) or action is None:
@@ -167,7 +168,7 @@ def checked(action, name: str, options: dict, label: str, lower, upper, counts: 
         )
     if not np.all(np.isfinite(a)):
         raise PluginError(f"{label} returned a non-finite {name} action", DURING)
-    low, high = bounds(name, options, lower, upper)
+    low, high = box if box is not None else bounds(name, options, lower, upper)
     clipped = np.clip(a, low, high)
     if not np.array_equal(clipped, a):
         counts.clipped += 1

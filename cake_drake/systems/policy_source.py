@@ -142,6 +142,7 @@ class PolicySource(LeafSystem):
         self._observed: tuple | None = None
         #: A policy may carry its own per-call budget (s); None: none (the Gym env's own).
         self._budget_s = getattr(policy, "act_budget_s", ACT_BUDGET_S)
+        self._box = spaces.bounds(space, self.options, *limits)  # the action's (low, high)
         self._desired, self._fingers = np.zeros(14), np.zeros(4)
         self._count, self._labels = np.zeros(1), np.zeros(2)
         self._written: tuple | None = None
@@ -246,7 +247,7 @@ class PolicySource(LeafSystem):
                 return
             lower, upper = self.limits
             a = spaces.checked(
-                action, self.space, self.options, self.label, lower, upper, self.counts
+                action, self.space, self.options, self.label, lower, upper, self.counts, self._box
             )
             self.last_action = a
             if self.space == "joint_chunk":
