@@ -16,7 +16,8 @@ SYSTEM_PACKAGES := system-packages.txt
 
 # $(call ensure_packages,GOAL,GOALS): install the Debian packages system-packages.txt lists
 # for any of GOALS that are missing: as root, or with password-less sudo; otherwise stop at
-# once with the apt-get line to run. Without dpkg (not Debian) it only names them.
+# once with the apt-get line to run. Without dpkg (not Debian) it only names them. Two makes
+# at once (two checkouts) take turns at apt (a lock file, and apt's own lock waited for).
 define ensure_packages
 @want=$$(sed 's/#.*//' $(SYSTEM_PACKAGES) | awk -v goals=' $(2) ' \
 	  'NF >= 2 && index(goals, " " $$2 " ") { print $$1 }'); \
@@ -38,8 +39,10 @@ else \
 	exit 1; \
 fi; \
 echo "make $(1): installing Debian packages: $$missing"; \
-$$sudo apt-get update -qq && \
-$$sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing >/dev/null
+lock=""; command -v flock >/dev/null 2>&1 && lock="flock -w 900 /tmp/.cake_drake-apt.lock"; \
+$$sudo $$lock apt-get -o DPkg::Lock::Timeout=900 update -qq && \
+$$sudo $$lock env DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=900 \
+	install -y -qq --no-install-recommends $$missing >/dev/null
 endef
 
 system-packages-run:
