@@ -267,10 +267,12 @@ def test_plain_lerobot_train_trains_on_a_recording(trained, tmp_path):
     import shlex
 
     shutil.copytree(trained / "ds", tmp_path / "stack2_demos")
-    argv = shlex.split(LEROBOT_TRAIN)
-    argv[0] = str(Path(sys.executable).parent / argv[0])
-    r = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=600,
-                       env={**os.environ, "HF_HUB_OFFLINE": "1"})  # fmt: skip
+    argv = shlex.split(LEROBOT_TRAIN)[1:]  # lerobot-train, the venv's console script
+    exe = Path(sys.executable).parent / "lerobot-train"
+    r = subprocess.run(
+        [str(exe), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+        env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )  # fmt: skip
     assert r.returncode == 0, r.stderr[-2000:]
     model = tmp_path / "stack2_lerobot" / "checkpoints" / "last" / "pretrained_model"
     assert (model / "config.json").is_file()

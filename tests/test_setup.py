@@ -273,13 +273,13 @@ def test_missing_packages_as_root_are_installed(stubs):
     install = [ln for ln in calls.splitlines() if " install " in ln]
     assert len(install) == 1
     assert all(e.package in install[0].split() for e in read_packages())
-    assert "apt-get update" in calls and "sudo" not in calls
+    assert "apt-get -o DPkg::Lock::Timeout=900 update" in calls and "sudo" not in calls
 
 
 def test_missing_packages_with_passwordless_sudo_are_installed_through_it(stubs):
     r, calls = _make("system-packages-test", stubs, uid=1000, installed=False, sudo_ok=True)
     assert r.returncode == 0, r.stderr
-    assert "sudo env DEBIAN_FRONTEND=noninteractive apt-get install" in calls
+    assert "sudo flock -w 900 /tmp/.cake_drake-apt.lock env DEBIAN_FRONTEND=noninteractive" in calls
 
 
 def test_nothing_to_do_when_everything_is_installed(stubs):
