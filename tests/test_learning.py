@@ -254,12 +254,7 @@ def test_a_checkpoint_acts_in_evaluate_a_run_and_the_gym_env(trained, tmp_path):
 
 
 #: docs/learning.md shows this command; the test runs it verbatim (a small network).
-LEROBOT_TRAIN = (
-    "lerobot-train --dataset.repo_id=cake_drake/stack2 --dataset.root=stack2_demos "
-    "--dataset.video_backend=pyav --policy.type=act --policy.pretrained_backbone_weights=null "
-    "--policy.push_to_hub=false --policy.device=cpu --policy.dim_model=64 "
-    "--policy.dim_feedforward=128 --steps=2 --batch_size=2 --output_dir=stack2_lerobot"
-)
+LEROBOT_TRAIN = "lerobot-train --dataset.repo_id=cake_drake/stack2 --dataset.root=stack2_demos --dataset.video_backend=pyav --policy.type=act --policy.pretrained_backbone_weights=null --policy.push_to_hub=false --policy.device=cpu --policy.dim_model=64 --policy.dim_feedforward=128 --steps=2 --batch_size=2 --output_dir=stack2_lerobot"  # noqa: E501 - verbatim
 
 
 @pytest.mark.slow
