@@ -68,7 +68,7 @@ def test_problem_5_is_built_through_the_environment(space):
 
 
 @pytest.mark.slow
-def test_the_policy_slot_runs_it_and_it_says_when_the_goal_holds():
+def test_the_policy_slot_runs_it_to_the_goal():
     s = Scenario(
         reference=Policy(
             factory="cake_drake.learning.expert:make",
@@ -80,7 +80,10 @@ def test_the_policy_slot_runs_it_and_it_says_when_the_goal_holds():
     result = run(s, write=False)
     assert result.success, result.message
     source = result.cake.reference.policy
-    assert source.done and source.policy.reason == "goal reached"
+    # The run ends when the goal holds (the slot reads it, or the expert says so first),
+    # never on the step budget.
+    assert source.done and source.ended is None
+    assert source.policy.reason in (None, "goal reached")
 
 
 @pytest.mark.slow
@@ -108,7 +111,7 @@ def test_the_same_seed_gives_the_same_actions():
 # --- disturbed ----------------------------------------------------------------------------
 
 #: (action space, seed): episodes whose disturbance drops the carried cube.
-DISTURBED = [("ee_delta", 2), ("ee_delta", 5), ("joint_position", 1), ("joint_position", 2)]
+DISTURBED = [("ee_delta", 2), ("ee_delta", 7), ("joint_position", 1), ("joint_position", 2)]
 
 
 @pytest.mark.slow
