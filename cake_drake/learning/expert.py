@@ -77,8 +77,7 @@ from cake_drake.symbolic import (
 from cake_drake.symbolic.grounding import apply_action
 from cake_drake.symbolic.kernels import kernels, latest_kernel
 from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
-from cake_drake.systems.monitor import TABLE_REACH
-from cake_drake.world.facts import read_facts, stack_offsets
+from cake_drake.world.facts import lost_cubes, read_facts, stack_offsets
 from cake_drake.world.scene import CUBE_SIZE
 
 #: s a world that does not read as facts (a cube falling, rolling or tilted) is waited for.
@@ -144,19 +143,6 @@ def measured(observation: Mapping, cubes: Sequence[str]) -> Measured:
     rows = np.asarray(rows, float).reshape(-1, 7)
     poses = {name: _pose(rows[k]) for k, name in enumerate(cubes)}
     return Measured(state[:7].copy(), float(state[7]), _pose(ee), poses)
-
-
-def lost_cubes(cubes: Mapping[str, RigidTransform]) -> list[str]:
-    """Cubes no plan can use: off the table or out of the arm's reach (the monitor's test)."""
-    return [
-        f"{n} fell off the table (at {np.round(X.translation(), 2).tolist()} m)"
-        for n, X in sorted(cubes.items())
-        if X.translation()[2] < -0.01
-    ] + [
-        f"{n} is out of the arm's reach ({np.hypot(*X.translation()[:2]):.2f} m from its base)"
-        for n, X in sorted(cubes.items())
-        if np.hypot(*X.translation()[:2]) > TABLE_REACH
-    ]
 
 
 def _angle(R1: RotationMatrix, R2: RotationMatrix) -> float:

@@ -6,7 +6,6 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
-import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -17,12 +16,10 @@ from cake_drake.symbolic.grounding import apply_action, ground_all
 from cake_drake.symbolic.kernels import kernels, latest_kernel
 from cake_drake.symbolic.roles import blocksworld_roles
 from cake_drake.systems.plan_source import ActionCommand, Refusal
-from cake_drake.world.facts import read_facts
+from cake_drake.world.facts import lost_cubes, read_facts
 
 #: How long (s) the monitor waits for a disturbed world to come to rest before it judges.
 SETTLE_WAIT_S = 1.5
-#: A cube farther than this from the robot's base is out of the arm's reach.
-TABLE_REACH = 0.85  # m
 
 
 @dataclass(frozen=True)
@@ -145,15 +142,7 @@ class ExecutionMonitor(LeafSystem):
         X_WG = poses[self._hand] @ self._X_HG
         fingers = float(self._hand_port.Eval(context)[0])
         reading = read_facts(cubes, X_WG=X_WG, finger_opening=fingers)
-        lost = [
-            f"{n} fell off the table (at {np.round(X.translation(), 2).tolist()} m)"
-            for n, X in sorted(cubes.items())
-            if X.translation()[2] < -0.01
-        ] + [
-            f"{n} is out of the arm's reach ({np.hypot(*X.translation()[:2]):.2f} m from its base)"
-            for n, X in sorted(cubes.items())
-            if np.hypot(*X.translation()[:2]) > TABLE_REACH
-        ]
+        lost = lost_cubes(cubes)
         facts = self._roles.from_canonical(reading.facts) | self._static
         return facts, tuple(lost), reading.problems
 

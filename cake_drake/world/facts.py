@@ -110,3 +110,20 @@ def stack_offsets(poses: Mapping[str, RigidTransform], facts) -> dict[str, float
         for f in facts
         if f[0] == "on"
     }
+
+
+#: m from the arm's base beyond which a cube is out of reach (no plan can use it).
+TABLE_REACH = 0.85
+
+
+def lost_cubes(cubes: Mapping[str, RigidTransform]) -> list[str]:
+    """Cubes no plan can use, each as a line: off the table, or out of the arm's reach."""
+    return [
+        f"{n} fell off the table (at {np.round(X.translation(), 2).tolist()} m)"
+        for n, X in sorted(cubes.items())
+        if X.translation()[2] < -0.01
+    ] + [
+        f"{n} is out of the arm's reach ({np.hypot(*X.translation()[:2]):.2f} m from its base)"
+        for n, X in sorted(cubes.items())
+        if np.hypot(*X.translation()[:2]) > TABLE_REACH
+    ]
