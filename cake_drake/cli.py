@@ -1031,13 +1031,16 @@ TRAIN_DOC = """Train a policy on a recording with LeRobot's own training loop, o
 
 DATASET is a folder written by python -m cake_drake.record. With no other flag the
 recipe of the recording's task is used (models/scenarios/learning.yaml: policy, inputs,
-steps, batch size, network size); flags override it. --inputs state reads the joints and
-observation.environment_state (the cubes' poses and the goal: trains on a CPU in
-minutes), images the cameras (GPU work), both all of them. Nothing is downloaded: the
-dataset is read from its folder and backbones start from scratch unless --weights names
-a file. The checkpoint is LeRobot's (OUT/checkpoints/last/pretrained_model): evaluate it
-with python -m cake_drake.evaluate OUT, or run it with reference: !Policy {checkpoint: OUT}.
---resume continues OUT's training up to --steps.
+steps, batch size, network size); flags override it. --policy mlp is the project's own
+state policy (a multilayer perceptron predicting joint offsets in chunks, registered with
+LeRobot as the policy type cake_mlp), act and diffusion are LeRobot's ACT and Diffusion
+Policy. --inputs state reads the joints and observation.environment_state (the cubes'
+poses and the goal: trains on a CPU), images the cameras (GPU work), both all of them.
+Nothing is downloaded: the dataset is read from its folder and backbones start from
+scratch unless --weights names a file. The checkpoint is LeRobot's
+(OUT/checkpoints/last/pretrained_model): evaluate it with python -m cake_drake.evaluate
+OUT, or run it with reference: !Policy {checkpoint: OUT}. --resume continues OUT's
+training up to --steps.
 
 --dagger ROUNDS trains the recipe on DATASET, then each round rolls the checkpoint out for
 --episodes-per-round N episodes (default 10) of the recording's task (report.json's spec),
@@ -1068,7 +1071,7 @@ def train_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("dataset", type=Path, help="a recording (python -m cake_drake.record)")
     p.add_argument("--out", type=Path, required=True, help="the training's folder")
-    p.add_argument("--policy", help="act | diffusion (default: the recipe's)")
+    p.add_argument("--policy", help="mlp | act | diffusion (default: the recipe's)")
     p.add_argument("--inputs", help="state | images | both (default: the recipe's)")
     p.add_argument("--steps", type=int, help="training steps (default: the recipe's)")
     p.add_argument("--batch-size", type=int, help="batch size (default: the recipe's)")

@@ -147,7 +147,7 @@ class Training:
     """A learning task's recipe for ``python -m cake_drake.train``: LeRobot's policy, what it
     reads, how long it trains and how big its network is (data, not code)."""
 
-    policy: str = "act"  # act | diffusion
+    policy: str = "act"  # act | diffusion | mlp
     inputs: str = "state"  # state | images | both
     steps: int = 20000
     batch_size: int = 64
@@ -158,9 +158,13 @@ class Training:
     dim_feedforward: int = 512
     n_encoder_layers: int = 2
     down_dims: list[int] = field(default_factory=lambda: [64, 128, 256])
+    #: The MLP's hidden layers (mlp).
+    hidden_dims: list[int] = field(default_factory=lambda: [512, 512, 512])
     #: Actions predicted at once, and how many of them are executed before asking again.
     chunk_size: int = 20
     n_action_steps: int = 10
+    #: Observations the MLP reads at once: the current one and those before it (mlp).
+    n_obs_steps: int = 1
 
 
 ReferenceConfig = Planned | Recorded | Policy
@@ -254,6 +258,8 @@ def _scenario_paths(scenario: Scenario):
         yield scenario.task, "plan"
     if isinstance(scenario.reference, Recorded) and scenario.reference.path:
         yield scenario.reference, "path"
+    if isinstance(scenario.reference, Policy) and scenario.reference.checkpoint:
+        yield scenario.reference, "checkpoint"
 
 
 def resolved(scenario: Scenario, base: Path | None) -> Scenario:

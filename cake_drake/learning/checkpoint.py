@@ -114,6 +114,8 @@ class CheckpointPolicy:
         from lerobot.configs.policies import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
+        import cake_drake.learning.mlp  # noqa: F401 - registers the cake_mlp policy type
+
         config = PreTrainedConfig.from_pretrained(self.folder)
         config.device = self.device
         with contextlib.redirect_stdout(io.StringIO()):  # lerobot prints where it loads from

@@ -30,7 +30,9 @@ from cake_drake.errors import InputError
 from cake_drake.learning import dataset as datasets
 from cake_drake.scenario import Training
 
-POLICIES = ("act", "diffusion")
+#: ``mlp`` is the project's own state policy, registered with LeRobot as ``cake_mlp``
+#: (:mod:`cake_drake.learning.mlp`); the others are LeRobot's.
+POLICIES = ("act", "diffusion", "mlp")
 INPUTS = ("state", "images", "both")
 #: What the output folder holds (nothing else is written there).
 TRAIN_OUTPUTS = ("checkpoints", "train.json")
@@ -106,6 +108,8 @@ def check(
         value = getattr(recipe, name)
         if not (isinstance(value, int) and lo <= value <= hi):
             raise InputError(f"--{name.replace('_', '-')} {value!r}: a whole number, {lo} to {hi}")
+    if recipe.policy == "mlp" and recipe.inputs != "state":
+        raise InputError(f"--policy mlp reads the state only, not --inputs {recipe.inputs}")
     if not 1 <= recipe.n_action_steps <= recipe.chunk_size:
         raise InputError(
             f"training.n_action_steps {recipe.n_action_steps}: 1 to chunk_size "
@@ -141,6 +145,19 @@ def _policy_config(recipe: Training, device: str, weights: str | None):
             n_action_steps=recipe.n_action_steps,
             optimizer_lr=recipe.lr,
             optimizer_lr_backbone=recipe.lr,
+        )
+    if recipe.policy == "mlp":
+        from cake_drake.learning.mlp import CakeMLPConfig
+
+        return CakeMLPConfig(
+            device=device,
+            push_to_hub=False,
+            hidden_dims=list(recipe.hidden_dims),
+            n_obs_steps=recipe.n_obs_steps,
+            chunk_size=recipe.chunk_size,
+            n_action_steps=recipe.n_action_steps,
+            optimizer_lr=recipe.lr,
+            scheduler_decay_steps=recipe.steps,
         )
     from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
 
@@ -192,12 +209,18 @@ def train(
     from lerobot.datasets.utils import dataset_to_policy_features
     from lerobot.scripts.lerobot_train import train as lerobot_train
 
+    import cake_drake.learning.mlp  # noqa: F401 - registers the cake_mlp policy type
+
     out = Path(out)
     where = device_for(device)
+    cores = len(os.sched_getaffinity(0))
+    # The MLP's step is cheap next to lerobot's loading of a batch (~20 ms against ~2 ms a
+    # sample on one core): every core loads. A transformer's step is the cost instead.
+    workers = cores if recipe.policy == "mlp" else 0
     if where == "cpu":  # leave a core to the rest: two threads on two busy cores ran 4-10x slower
         import torch
 
-        torch.set_num_threads(max(1, len(os.sched_getaffinity(0)) - 1))
+        torch.set_num_threads(1 if workers else max(1, cores - 1))
     if resume:
         config = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
         steps = f"--steps={recipe.steps}", f"--save_freq={recipe.steps}", f"--output_dir={out}"
@@ -218,7 +241,7 @@ def train(
             steps=recipe.steps,
             batch_size=recipe.batch_size,
             seed=seed,
-            num_workers=0,
+            num_workers=workers,
             save_freq=recipe.steps,
             log_freq=max(1, min(200, recipe.steps // 10)),
             eval_freq=0,
