@@ -177,7 +177,7 @@ def test_a_dagger_round_labels_the_learners_states_and_fine_tunes(dagger_run):
     folder, out, stdout = dagger_run
     plain = json.loads((folder / "plain" / "report.json").read_text())
     lines = stdout.splitlines()
-    assert lines[0].startswith("round 0: act trained 2 steps on 2 demonstrations")
+    assert lines[0].startswith("round 0: mlp trained 2 steps on 2 demonstrations")
     summary = json.loads((out / "train.json").read_text())["dagger"]
     (row,) = summary["rounds"]
     added, by_learner = row["frames_added"], row["learner_frames"]

@@ -88,7 +88,7 @@ def test_the_learning_tasks_have_equal_cameras_and_a_recipe():
     for name in ("stack2", "tower3", "tower5", "blocks3"):
         s = load_scenario(LEARNING, name)
         assert len({(c.width, c.height) for c in s.cameras}) == 1, name
-        assert s.training.policy in ("act", "diffusion") and s.training.steps > 0
+        assert s.training.policy in ("mlp", "act", "diffusion") and s.training.steps > 0
 
 
 # --- what a learner reads ------------------------------------------------------------------
@@ -197,19 +197,39 @@ def test_a_recording_has_environment_state_and_lerobot_loads_it(trained):
     frame = data[0]
     assert tuple(frame["observation.environment_state"].shape) == (ENVIRONMENT_STATE_SIZE,)
     report = json.loads((trained / "ds" / "report.json").read_text())
-    assert report["task"] == "stack2" and report["training"]["policy"] == "act"
+    assert report["task"] == "stack2" and report["training"]["policy"] == "mlp"
 
 
 @pytest.mark.slow
 def test_train_writes_a_lerobot_checkpoint_with_the_tasks_recipe(trained):
     model = trained / "run" / "checkpoints" / "last" / "pretrained_model"
     config = json.loads((model / "config.json").read_text())
-    assert config["type"] == "act" and config["dim_model"] == 128  # the recipe's size
+    assert config["type"] == "cake_mlp" and config["hidden_dims"] == [512, 512, 512]
+    assert (config["n_obs_steps"], config["chunk_size"], config["n_action_steps"]) == (2, 10, 10)
     assert set(config["input_features"]) == {
         "observation.state",
         "observation.environment_state",
     }
     assert (model / "model.safetensors").stat().st_size < 5_000_000
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("policy", ["act", "diffusion"])
+def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, policy):
+    r = cake("train", str(trained / "ds"), "--out", str(tmp_path / "run"), "--policy", policy,
+             "--steps", "2", "--batch-size", "2", "--device", "cpu")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    model = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
+    assert json.loads((model / "config.json").read_text())["type"] == policy
+    from cake_drake.learning.checkpoint import make
+
+    env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
+                         control_mode="joint_position")  # fmt: skip
+    acting = make(str(tmp_path / "run"), "cpu")
+    obs, _ = env.reset(seed=3)
+    acting.reset(env.unwrapped.policy_task, 3)
+    action = acting.act(obs)
+    assert action.shape == (8,) and np.all(np.isfinite(action))
 
 
 @pytest.mark.slow
@@ -495,3 +515,24 @@ def test_a_run_ends_when_the_goal_holds_released_and_a_held_cube_is_not_on(tmp_p
     assert goal_progress(on_b, 0.04, goal).reached  # open hand, far away
     held = RigidTransform([0.5, 0.0, 0.06])  # the grasp frame at a's centre, fingers on it
     assert not goal_progress(on_b, 0.019, goal, held).reached
+
+
+# --- the shipped learned policy ---------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_the_shipped_state_policy_stacks_on_its_documented_seed(tmp_path):
+    """docs/learning.md's learned_stack2: the checkpoint in models/policies/stack2, offline,
+    with no training, stacks a on b on the scenario's seed, released, within tolerance."""
+    policy = ROOT / "models" / "policies" / "stack2"
+    assert (policy / "model.safetensors").stat().st_size < 5_000_000
+    assert json.loads((policy / "config.json").read_text())["type"] == "cake_mlp"
+    assert load_scenario(LEARNING, "learned_stack2").seed == 100000  # a held-out seed
+    r = cake("run", "--scenario", str(LEARNING), "--name", "learned_stack2", "--out", "out",
+             cwd=tmp_path)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "goal reached: a on b" in r.stdout
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["success"] and summary["policy"]["said_done"]
+    assert summary["policy"]["steps"] < summary["policy"]["max_steps"]
+    assert max(summary["stack_offsets_mm"].values()) < 5.0
