@@ -1,5 +1,7 @@
-"""The ``cake_mlp`` policy's processors: batching and the device only, since the policy
-standardises its own inputs and outputs (see :class:`CakeMLPConfig`)."""
+"""The ``cake_mlp`` policy's processors: LeRobot's usual steps, whose normalisation is the
+identity (the policy standardises its own inputs and outputs, see :class:`CakeMLPConfig`);
+they are there so that LeRobot's resume and fine-tune, which hand the normaliser new
+statistics by its step's name, find it."""
 
 from __future__ import annotations
 
@@ -8,9 +10,11 @@ from typing import Any
 from lerobot.processor import (
     AddBatchDimensionProcessorStep,
     DeviceProcessorStep,
+    NormalizerProcessorStep,
     PolicyAction,
     PolicyProcessorPipeline,
     RenameObservationsProcessorStep,
+    UnnormalizerProcessorStep,
 )
 from lerobot.processor.converters import policy_action_to_transition, transition_to_policy_action
 from lerobot.utils.constants import (
@@ -29,11 +33,24 @@ def make_cake_mlp_pre_post_processors(
             RenameObservationsProcessorStep(rename_map={}),
             AddBatchDimensionProcessorStep(),
             DeviceProcessorStep(device=config.device),
+            NormalizerProcessorStep(
+                features={**config.input_features, **config.output_features},
+                norm_map=config.normalization_mapping,
+                stats=dataset_stats,
+                device=config.device,
+            ),
         ],
         name=POLICY_PREPROCESSOR_DEFAULT_NAME,
     )
     post = PolicyProcessorPipeline[PolicyAction, PolicyAction](
-        steps=[DeviceProcessorStep(device="cpu")],
+        steps=[
+            UnnormalizerProcessorStep(
+                features=config.output_features,
+                norm_map=config.normalization_mapping,
+                stats=dataset_stats,
+            ),
+            DeviceProcessorStep(device="cpu"),
+        ],
         name=POLICY_POSTPROCESSOR_DEFAULT_NAME,
         to_transition=policy_action_to_transition,
         to_output=transition_to_policy_action,
