@@ -280,6 +280,37 @@ def test_helpers_or_not_the_outputs_are_the_same_bytes(tmp_path):
     }
 
 
+def test_a_run_after_an_in_process_render_draws_its_outputs(tmp_path):
+    """A process that has rendered (a notebook, a test suite) keeps a render engine's GL
+    state, which a forked helper inherits and then waits on forever at its first render
+    (seen as 'the output helper did not answer in 120 s'). The outputs are then drawn in
+    the process itself, and the run ends."""
+    script = (
+        "import sys\n"
+        "sys.path.insert(0, sys.argv[1])\n"
+        "from conftest import scenario\n"
+        "from cake_drake.pipeline import run\n"
+        "from cake_drake.outputs import worker\n"
+        "from cake_drake.world.render import Renderer\n"
+        "Renderer(['a']).render({})\n"
+        "forked = []\n"
+        "class Seen(worker.OutputWorker):\n"
+        "    def __init__(self, *a, **k):\n"
+        "        super().__init__(*a, **k)\n"
+        "        forked.append(self.forked)\n"
+        "worker.OutputWorker = Seen\n"
+        "result = run(scenario('position', folder=sys.argv[2], helpers='always'))\n"
+        "print(result.success, forked)\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", script, str(Path(__file__).parent), str(tmp_path / "out")],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == ["True", "[False]"], r.stdout
+    assert (tmp_path / "out" / "final_state.png").stat().st_size > 0
+
+
 def test_no_helpers_are_forked_when_every_core_is_busy():
     """outputs.helpers auto: with a task busy on every core, no core is spare."""
     from cake_drake.outputs.worker import OutputWorker, spare_core

@@ -10,7 +10,8 @@ the logs and write ``final_state.png`` and the joint plot side by side, while th
 process writes the rest. Apart, each stays small (VTK and matplotlib never share a
 process). Helpers are forked only when a core is free for them (:func:`spare_core`): on
 a busy machine they would only compete with the simulation for the cores. Without them,
-where forking is not available, or when a helper fails, the same functions run in-process.
+where forking is not available, after this process made a render engine (whose GL state
+a fork cannot carry), or when a helper fails, the same functions run in-process.
 """
 
 from __future__ import annotations
@@ -203,6 +204,16 @@ def spare_core(samples: int = 8, gap_s: float = 0.0005) -> bool:
     return fewest < cores
 
 
+def _gl_here() -> bool:
+    """Whether this process made a render engine (a notebook, a suite, a run with
+    cameras): a helper forked now would inherit its GL state and hang at its first render,
+    so the outputs are drawn in this process instead."""
+    import sys
+
+    cameras = sys.modules.get("cake_drake.world.cameras")
+    return bool(cameras is not None and cameras.engines_made)
+
+
 class OutputWorker:
     """Fork the helpers now, with the blocks and initial poses; hand over the picture and
     the plot later. ``helpers`` is ``outputs.helpers`` (auto, always or never); with
@@ -218,7 +229,8 @@ class OutputWorker:
     ):
         self._blocks = list(blocks)
         self._picture = self._plot = None
-        self.forked = spare_core() if helpers == "auto" else helpers == "always"
+        wanted = spare_core() if helpers == "auto" else helpers == "always"
+        self.forked = wanted and not _gl_here()
         if not self.forked:
             return
         try:

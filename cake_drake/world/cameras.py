@@ -118,6 +118,19 @@ def check_cameras(cameras: Sequence[Camera]) -> None:
             raise InputError(f"{where}: the camera stands at its own target")
 
 
+#: Whether this process has made a VTK render engine. Its GL state does not survive a fork
+#: (a forked child that renders waits forever for threads it does not have), so the
+#: output helpers are not forked after one (cake_drake.outputs.worker).
+engines_made = False
+
+
+def render_engine():
+    """A headless ``RenderEngineVtk`` (EGL), noted in :data:`engines_made`."""
+    global engines_made
+    engines_made = True
+    return MakeRenderEngineVtk(RenderEngineVtkParams())
+
+
 def add_cameras(builder: DiagramBuilder, scene, cameras: Sequence[Camera]) -> dict:
     """Add the VTK renderer and one ``RgbdSensor`` per camera; returns name -> sensor."""
     if not cameras:
@@ -125,7 +138,7 @@ def add_cameras(builder: DiagramBuilder, scene, cameras: Sequence[Camera]) -> di
     sg, plant = scene.scene_graph, scene.plant
     if not sg.HasRenderer(RENDERER):
         try:
-            sg.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
+            sg.AddRenderer(RENDERER, render_engine())
         except RuntimeError as e:
             raise InputError(
                 f"cameras: the headless renderer could not start ({str(e).splitlines()[0]}); "
@@ -245,7 +258,7 @@ def _render_probe():
     builder = DiagramBuilder()
     sg = builder.AddSystem(SceneGraph())
     try:
-        sg.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
+        sg.AddRenderer(RENDERER, render_engine())
     except RuntimeError:
         return None
     core = RenderCameraCore(

@@ -17,16 +17,14 @@ from pydrake.geometry import (
     ColorRenderCamera,
     DepthRange,
     DepthRenderCamera,
-    MakeRenderEngineVtk,
     RenderCameraCore,
-    RenderEngineVtkParams,
 )
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, RgbdSensor
 
 from cake_drake.errors import InputError
-from cake_drake.world.cameras import look_at
+from cake_drake.world.cameras import look_at, render_engine
 from cake_drake.world.scene import Q_HOME, WorldConfig, add_world, set_arm_positions, set_cube_poses
 
 RENDERER = "vtk"
@@ -49,7 +47,7 @@ class Renderer:
         builder = DiagramBuilder()
         self.scene = add_world(builder, blocks, WorldConfig(time_step=0.0))
         sg = self.scene.scene_graph
-        sg.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams()))
+        sg.AddRenderer(RENDERER, render_engine())
         core = RenderCameraCore(
             RENDERER,
             CameraInfo(width, height, np.radians(45.0)),
