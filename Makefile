@@ -5,14 +5,49 @@
 # `test` extra on top (the optional planners, OMPL, Ray, Gymnasium, LeRobot with torch).
 # One .venv for both: `make test` after `make run` adds the extras, `make run` after
 # `make test` installs nothing.
-PYTHON ?= python3
+#
+# Which Python makes .venv: PYTHON if you set it, else the newest found of python3.13 and
+# python3.12 (on PATH, uv's, pyenv's), then python3. `make test` needs 3.12 or newer
+# (Drake 1.58 and LeRobot 0.6 have no wheels for 3.11); `make run` also takes 3.11
+# (Debian 12's own, with Drake 1.51). `make test` also makes .venv-oldest, the oldest
+# supported pair (Python 3.11, Drake 1.51.1), where a Python 3.11 is found: a test runs
+# the main job there.
+PYTHON ?=
 VENV := .venv
 PY := $(VENV)/bin/python
 RUN_STAMP := $(VENV)/.installed-run
 TEST_STAMP := $(VENV)/.installed-test
 SYSTEM_PACKAGES := system-packages.txt
+OLDEST := .venv-oldest
+OLDEST_DRAKE := 1.51.1
 
-.PHONY: run test notebooks lint bench clean venv system-packages-run system-packages-test
+# $(call find_python,MINOR,CANDIDATES): the first of CANDIDATES (default: the newest first,
+# as above) that runs and is Python 3.MINOR or newer.
+python_ok = import sys; sys.exit(sys.version_info[:2] < (3, $(1)))
+define find_python
+$(shell for p in $(or $(2),$(PYTHON),python3.13 "$$(uv python find 3.13 2>/dev/null)" \
+	  $$(ls -d "$$(pyenv root 2>/dev/null)"/versions/3.13*/bin/python3.13 2>/dev/null | sort -rV 2>/dev/null) \
+	  python3.12 "$$(uv python find 3.12 2>/dev/null)" \
+	  $$(ls -d "$$(pyenv root 2>/dev/null)"/versions/3.12*/bin/python3.12 2>/dev/null | sort -rV 2>/dev/null) \
+	  python3); do \
+	[ -n "$$p" ] && "$$p" -c '$(call python_ok,$(1))' 2>/dev/null && { command -v "$$p"; break; }; \
+	done)
+endef
+# The goals that install the test extra need 3.12; `make run` alone takes 3.11.
+NEEDS_TEST := $(filter-out run system-packages-run,$(or $(MAKECMDGOALS),run))
+MIN_MINOR := $(if $(NEEDS_TEST),12,11)
+VENV_PYTHON = $(or $(call find_python,$(MIN_MINOR)),$(error make $(or $(MAKECMDGOALS),run) \
+	needs Python 3.$(MIN_MINOR) or newer$(if $(PYTHON), and PYTHON=$(PYTHON) is not,$(strip \
+	) and none was found (python3.13$(comma) python3.12$(comma) uv's$(comma) pyenv's$(comma) python3)); \
+	get one with: uv python install 3.12 (or: pyenv install 3.12)$(comma) then make \
+	$(or $(MAKECMDGOALS),run) again$(if $(PYTHON),, (or name it: PYTHON=/path/to/python3.12))))
+comma := ,
+# Python 3.11 for the oldest supported pair: on PATH, uv's, pyenv's, or python3.
+OLDEST_PYTHON = $(call find_python,11,python3.11 "$$(uv python find 3.11 2>/dev/null)" \
+	$$(ls -d "$$(pyenv root 2>/dev/null)"/versions/3.11*/bin/python3.11 2>/dev/null | sort -rV 2>/dev/null) \
+	python3)
+
+.PHONY: python run test notebooks lint bench clean venv oldest system-packages-run system-packages-test
 
 # $(call ensure_packages,GOAL,GOALS): install the Debian packages system-packages.txt lists
 # for any of GOALS that are missing: as root, or with password-less sudo; otherwise stop at
@@ -52,7 +87,7 @@ system-packages-test:
 	$(call ensure_packages,test,run test)
 
 $(VENV)/bin/python:
-	$(PYTHON) -m venv $(VENV)
+	$(VENV_PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 
 # The base dependencies: refreshed when pyproject.toml changes. pip leaves installed
@@ -64,6 +99,8 @@ $(RUN_STAMP): pyproject.toml | $(VENV)/bin/python
 # The test extra on top: after the base install (so a changed pyproject.toml refreshes
 # the base first, and both stamps are current afterwards).
 $(TEST_STAMP): $(RUN_STAMP)
+	@$(PY) -c '$(call python_ok,12)' || { echo "error: .venv is $$($(PY) -V 2>&1), and make \
+	  test needs Python 3.12 or newer: remove it (make clean), then make test again" >&2; exit 1; }
 	$(PY) -m pip install --quiet -e '.[test]'
 	touch $(TEST_STAMP)
 
@@ -78,10 +115,28 @@ $(BYTECODE): $(RUN_STAMP) $(shell find cake_drake -name '*.py')
 # The development environment: everything `make test` installs.
 venv: $(TEST_STAMP) $(BYTECODE)
 
-run: system-packages-run $(BYTECODE)
+# Before anything is installed: the Python for a new .venv, or the one-line stop.
+python:
+	@: $(if $(wildcard $(PY)),,$(VENV_PYTHON))
+
+run: python system-packages-run $(BYTECODE)
 	$(PY) -m cake_drake.run --mode torque
 
-test: system-packages-test $(TEST_STAMP) $(BYTECODE)
+# The oldest supported pair, for tests/test_setup.py's run of the main job there: made
+# where a Python 3.11 is found (nothing to do elsewhere; the test says it was skipped).
+OLDEST_STAMP := $(OLDEST)/.installed-$(OLDEST_DRAKE)
+oldest:
+	@$(if $(OLDEST_PYTHON),$(MAKE) -s $(OLDEST_STAMP),echo "note: no Python 3.11 here: the \
+	  main job is not tested on the oldest supported pair (Python 3.11, Drake $(OLDEST_DRAKE))")
+
+$(OLDEST_STAMP): pyproject.toml
+	rm -rf $(OLDEST)
+	$(OLDEST_PYTHON) -m venv $(OLDEST)
+	$(OLDEST)/bin/python -m pip install --quiet --upgrade pip
+	$(OLDEST)/bin/python -m pip install --quiet drake==$(OLDEST_DRAKE) --editable .
+	touch $(OLDEST_STAMP)
+
+test: python system-packages-test $(TEST_STAMP) $(BYTECODE) oldest
 	$(PY) -m pytest
 
 notebooks: system-packages-test $(TEST_STAMP) $(BYTECODE)
@@ -98,4 +153,4 @@ bench: system-packages-run $(TEST_STAMP) $(BYTECODE)
 	$(PY) benchmarks/sweep.py models/sweeps/smoke.yaml models/sweeps/kd.yaml
 
 clean:
-	rm -rf $(VENV) outputs .pytest_cache
+	rm -rf $(VENV) $(OLDEST) outputs .pytest_cache

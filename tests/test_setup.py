@@ -108,6 +108,8 @@ class _Programs(ast.NodeVisitor):
             if isinstance(e.func, ast.Name) and e.func.id in ("str", "Path") and e.args:
                 return self.program(e.args[0], depth + 1)
         if isinstance(e, ast.Name):
+            if e.id == "OLDEST":  # .venv-oldest's Python (made by make test)
+                return [VENV]
             values = self.values_of(e.id)
             return [p for v in values for p in self.program(v, depth + 1)] if values else [None]
         return [None]
@@ -413,3 +415,87 @@ def test_the_main_job_imports_only_what_the_base_dependencies_install(tmp_path):
     }
     assert not outside, f"imported from distributions outside the base dependencies: {outside}"
     assert {"pydrake", "numpy", "pyperplan", "yaml"} <= set(found["new"])
+
+
+# --- which Python makes .venv --------------------------------------------------------------
+
+
+def _pythons(folder: Path, minors: list[int]) -> dict:
+    """An environment whose PATH holds only stand-ins for python3.MINOR (answering the
+    Makefile's version check as that Python would) and the few tools make needs."""
+    folder.mkdir()
+    for minor in minors:
+        _stub(folder, f"python3.{minor}", 'case "$2" in *"(3, 13)"*) n=13;; *"(3, 12)"*) n=12;; '
+              f'*) n=11;; esac; [ {minor} -ge "$n" ]')  # fmt: skip
+    (folder / "make").symlink_to(shutil.which("make"))
+    return {**os.environ, "PATH": str(folder)}
+
+
+def _venv_python(goal: str, env: dict):
+    r = subprocess.run(
+        [shutil.which("make"), "-n", "-C", str(ROOT), goal, "VENV=/nonexistent/.venv"],
+        env=env, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    lines = r.stdout.splitlines()
+    made = [ln.split()[0] for ln in lines if ln.endswith("-m venv /nonexistent/.venv")]
+    return r, made
+
+
+@pytest.mark.parametrize(
+    "minors, goal, chosen",
+    [([12, 13], "test", "python3.13"), ([12], "test", "python3.12"),
+     ([11, 12], "run", "python3.12"), ([11], "run", "python3.11")],
+)  # fmt: skip
+def test_the_newest_python_found_makes_the_venv(stubs, minors, goal, chosen):
+    env = _pythons(stubs / "bin", minors)
+    if minors == [11]:  # python3 is what a Debian 12 has
+        (stubs / "bin" / "python3").symlink_to(stubs / "bin" / "python3.11")
+        chosen = "python3"
+    r, made = _venv_python(goal, env)
+    assert r.returncode == 0, r.stderr
+    assert made == [str(stubs / "bin" / chosen)], r.stdout
+
+
+def test_make_test_without_python_3_12_is_one_line_before_anything_runs(stubs):
+    env = _pythons(stubs / "bin", [11])
+    r, made = _venv_python("test", env)
+    assert r.returncode != 0 and not made
+    assert "apt-get" not in r.stdout, "it stopped after the Debian packages"
+    lines = [ln for ln in r.stderr.splitlines() if "needs Python" in ln]
+    assert len(lines) == 1 and "make test needs Python 3.12 or newer" in lines[0], r.stderr
+    assert "uv python install 3.12" in lines[0] and "pyenv" in lines[0]
+
+
+# --- the oldest supported pair -------------------------------------------------------------
+
+OLDEST = ROOT / ".venv-oldest" / "bin" / "python"  # the scan above counts it as a venv's Python
+
+
+@pytest.mark.slow
+def test_the_main_job_runs_on_the_oldest_supported_pair(tmp_path):
+    """`make test` makes .venv-oldest (Python 3.11, Drake 1.51.1) where a Python 3.11 is
+    found: the README's main job builds the tower there, and a learning command says in
+    one line what it needs (exit 2) instead of failing inside LeRobot."""
+    if not OLDEST.exists():
+        pytest.skip("no .venv-oldest: make test makes it where a Python 3.11 is found")
+    probe = (
+        "import sys; from importlib.metadata import version; "
+        "print(sys.version_info[:2], version('drake'))"
+    )
+    r = subprocess.run([str(OLDEST), "-c", probe], capture_output=True, text=True, timeout=60)
+    assert r.stdout.split(maxsplit=2)[:2] == ["(3,", "11)"] and "1.51.1" in r.stdout, r.stdout
+    r = subprocess.run(
+        [str(OLDEST), "-m", "cake_drake.run", "--mode", "torque", "--out", "out"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "goal reached: a on b on c on d on e" in r.stdout
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["success"] is True
+    r = subprocess.run(
+        [str(OLDEST), "-m", "cake_drake.train", "nowhere", "--out", "trained"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "Python 3.12 or newer" in r.stderr and "3.11" in r.stderr

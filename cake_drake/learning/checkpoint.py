@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import io
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -81,7 +80,11 @@ def device_for(device: str) -> str:
 
 def check_folder(path: Path, action_space: str, device: str = "auto") -> Path:
     """Refuse, before anything is built, a folder that is no checkpoint, one whose action
-    does not fit ``action_space``, or a device that is not here; the model's folder."""
+    does not fit ``action_space``, or a device that is not here, or a Python or LeRobot
+    that cannot load it; the model's folder."""
+    from cake_drake.learning.dataset import require_lerobot
+
+    require_lerobot()
     folder = model_folder(path)
     size = action_size(folder)
     want = ACTION_SIZE.get(action_space)
@@ -103,7 +106,9 @@ class CheckpointPolicy:
     """See the module's docstring."""
 
     def __init__(self, path: str, device: str = "auto") -> None:
-        os.environ.setdefault("HF_HUB_OFFLINE", "1")
+        from cake_drake.learning.dataset import require_lerobot
+
+        require_lerobot()
         self.path = Path(path)
         self.folder = model_folder(self.path)
         self.device = device_for(device)

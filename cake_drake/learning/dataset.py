@@ -32,7 +32,9 @@ import numpy as np
 from cake_drake.errors import InputError
 from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, GOAL_COLUMNS, MAX_CUBES
 
-LEROBOT_PIP = "pip install 'cake_drake[lerobot]'  (lerobot 0.4, with torch: about 8 GB)"
+LEROBOT_PIP = "pip install 'cake_drake[lerobot]'  (lerobot 0.6, with torch: about 6 GB)"
+#: The oldest LeRobot the learning commands are written and tested against.
+LEROBOT_MIN = (0, 6)
 #: The dataset's name inside its root (lerobot wants an owner/name).
 REPO_ID = "cake_drake/stack"
 STATE_NAMES = [f"joint_{i}" for i in range(1, 8)] + ["gripper_width"]
@@ -50,15 +52,32 @@ ACTION_NAMES = {
 
 
 def require_lerobot() -> None:
-    """Refuse, with the line that installs it, where ``lerobot`` is not installed."""
+    """Refuse, in one line, where ``lerobot`` is not installed (with the line that installs
+    it), where this Python is older than LeRobot 0.6 needs (3.12), or where the installed
+    LeRobot is older than the one these commands are written against."""
     os.environ.setdefault("HF_HUB_OFFLINE", "1")  # never the hub: local files only
     os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
     os.environ.setdefault("HF_DATASETS_DISABLE_PROGRESS_BARS", "1")
+    if sys.version_info < (3, 12):
+        raise InputError(
+            f"the learning commands need LeRobot {'.'.join(map(str, LEROBOT_MIN))} or newer, "
+            f"which needs Python 3.12 or newer; this is Python {sys.version.split()[0]}: "
+            "make test makes a .venv with a newer Python where one is found"
+        )
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        found = version("lerobot")
+    except PackageNotFoundError:
+        raise InputError(f"LeRobot datasets need lerobot, which is not installed: "
+                         f"{LEROBOT_PIP}") from None  # fmt: skip
+    if tuple(int(p) for p in found.split(".")[:2] if p.isdigit()) < LEROBOT_MIN:
+        raise InputError(f"lerobot {found} is installed; the learning commands need "
+                         f"{'.'.join(map(str, LEROBOT_MIN))} or newer: {LEROBOT_PIP}")  # fmt: skip
     try:
         import lerobot.datasets.lerobot_dataset  # noqa: F401
     except ImportError as e:
-        raise InputError(f"LeRobot datasets need lerobot, which is not installed ({e}): "
-                         f"{LEROBOT_PIP}") from None  # fmt: skip
+        raise InputError(f"lerobot {found} does not import ({e}): {LEROBOT_PIP}") from None
 
 
 #: Who acted at a frame: 0 the demonstrator (or expert), 1 a learner.
@@ -128,6 +147,8 @@ def write(root: Path, episodes: Iterable, fps: float, control_mode: str, cameras
 
 
 def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  # noqa: N803
+    from lerobot.configs.video import RGBEncoderConfig
+
     dataset = LeRobotDataset.create(
         REPO_ID,
         fps=int(round(fps)),
@@ -136,7 +157,8 @@ def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  
         robot_type="franka_panda",
         use_videos=bool(cameras),
         video_backend="pyav",
-        vcodec="h264",
+        # H.264 through PyAV's own FFmpeg: decoded everywhere (LeRobot's default is AV1).
+        rgb_encoder=RGBEncoderConfig(vcodec="h264"),
     )
     frames = 0
     for ep in episodes:
