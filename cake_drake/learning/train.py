@@ -2,7 +2,9 @@
 
 :func:`train` builds lerobot's ``TrainPipelineConfig`` from a recipe (the
 :class:`cake_drake.scenario.Training` of the recording's task, or flags) and calls
-lerobot's ``train`` - its data loader, processors, optimiser, progress bar and checkpoints.
+lerobot's ``train`` - its sampler, processors, optimiser, progress bar and checkpoints -
+over batches gathered from the recording's columns in memory
+(:mod:`cake_drake.learning.batches`: the same samples as LeRobot's dataset, read once).
 Nothing is fetched: the dataset is read from its folder, the hub is off, and vision
 backbones start from scratch unless a weights file is named. The checkpoint is LeRobot's
 layout (``OUT/checkpoints/last/pretrained_model``), which ``evaluate``, a run's
@@ -200,32 +202,34 @@ def train(
     the module), from ``pretrained``'s weights when given; the checkpoint's folder."""
     from cake_drake.learning.checkpoint import device_for
 
-    keys = check(root, out, recipe, device, resume)
     datasets.require_lerobot()
+    keys = check(root, out, recipe, device, resume)
     os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
     from lerobot.configs.default import DatasetConfig
     from lerobot.configs.train import TrainPipelineConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
-    from lerobot.datasets.utils import dataset_to_policy_features
     from lerobot.scripts.lerobot_train import train as lerobot_train
+    from lerobot.utils.feature_utils import dataset_to_policy_features
 
     import cake_drake.learning.mlp  # noqa: F401 - registers the cake_mlp policy type
+    from cake_drake.learning.batches import fast_batches
 
     out = Path(out)
     where = device_for(device)
     cores = len(os.sched_getaffinity(0))
-    # The MLP's step is cheap next to lerobot's loading of a batch (~20 ms against ~2 ms a
-    # sample on one core): every core loads. A transformer's step is the cost instead.
-    workers = cores if recipe.policy == "mlp" else 0
-    if where == "cpu":  # leave a core to the rest: two threads on two busy cores ran 4-10x slower
+    # Batches come from the recording's columns in memory (cake_drake.learning.batches),
+    # gathered in this process: no loader workers, and the network gets every core but
+    # one (two threads on two busy cores ran 4-10x slower than one).
+    if where == "cpu":
         import torch
 
-        torch.set_num_threads(1 if workers else max(1, cores - 1))
+        torch.set_num_threads(max(1, cores - 1))
     if resume:
         config = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
         steps = f"--steps={recipe.steps}", f"--save_freq={recipe.steps}", f"--output_dir={out}"
         with _argv([f"--config_path={config}", "--resume=true", *steps]):
-            lerobot_train()
+            with fast_batches(keys):
+                lerobot_train()
     else:
         meta = LeRobotDatasetMetadata(repo_id, root=root)
         features = dataset_to_policy_features(meta.features)
@@ -241,12 +245,12 @@ def train(
             steps=recipe.steps,
             batch_size=recipe.batch_size,
             seed=seed,
-            num_workers=workers,
+            num_workers=0,
             save_freq=recipe.steps,
             log_freq=max(1, min(200, recipe.steps // 10)),
-            eval_freq=0,
+            env_eval_freq=0,
         )
-        with _argv([]):
+        with _argv([]), fast_batches(keys):
             lerobot_train(cfg)
     (out / "train.json").write_text(
         json.dumps({"dataset": str(root), "recipe": asdict(recipe), "seed": seed}, indent=2) + "\n"
