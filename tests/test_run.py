@@ -283,8 +283,8 @@ def test_helpers_or_not_the_outputs_are_the_same_bytes(tmp_path):
 def test_a_run_after_an_in_process_render_draws_its_outputs(tmp_path):
     """A process that has rendered (a notebook, a test suite) keeps a render engine's GL
     state, which a forked helper inherits and then waits on forever at its first render
-    (seen as 'the output helper did not answer in 120 s'). The outputs are then drawn in
-    the process itself, and the run ends."""
+    (seen as 'the output helper did not answer in 120 s'). The picture is then drawn in
+    the process itself, the plot still in its helper, and the run ends."""
     script = (
         "import sys\n"
         "sys.path.insert(0, sys.argv[1])\n"
@@ -297,7 +297,7 @@ def test_a_run_after_an_in_process_render_draws_its_outputs(tmp_path):
         "class Seen(worker.OutputWorker):\n"
         "    def __init__(self, *a, **k):\n"
         "        super().__init__(*a, **k)\n"
-        "        forked.append(self.forked)\n"
+        "        forked.append((self._picture is not None, self._plot is not None))\n"
         "worker.OutputWorker = Seen\n"
         "result = run(scenario('position', folder=sys.argv[2], helpers='always'))\n"
         "print(result.success, forked)\n"
@@ -307,7 +307,7 @@ def test_a_run_after_an_in_process_render_draws_its_outputs(tmp_path):
         capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert r.returncode == 0, r.stderr[-2000:]
-    assert r.stdout.split() == ["True", "[False]"], r.stdout
+    assert r.stdout.split() == ["True", "[(False,", "True)]"], r.stdout  # the plot's forked
     assert (tmp_path / "out" / "final_state.png").stat().st_size > 0
 
 

@@ -10,8 +10,9 @@ the logs and write ``final_state.png`` and the joint plot side by side, while th
 process writes the rest. Apart, each stays small (VTK and matplotlib never share a
 process). Helpers are forked only when a core is free for them (:func:`spare_core`): on
 a busy machine they would only compete with the simulation for the cores. Without them,
-where forking is not available, after this process made a render engine (whose GL state
-a fork cannot carry), or when a helper fails, the same functions run in-process.
+where forking is not available, or when a helper fails, the same functions run in-process;
+so does the picture after this process made a render engine (whose GL state a fork
+cannot carry).
 """
 
 from __future__ import annotations
@@ -206,8 +207,9 @@ def spare_core(samples: int = 8, gap_s: float = 0.0005) -> bool:
 
 def _gl_here() -> bool:
     """Whether this process made a render engine (a notebook, a suite, a run with
-    cameras): a helper forked now would inherit its GL state and hang at its first render,
-    so the outputs are drawn in this process instead."""
+    cameras): a picture helper forked now would inherit its GL state and hang at its
+    first render, so the picture is drawn in this process instead (the plot's helper,
+    which renders nothing, is forked as before)."""
     import sys
 
     cameras = sys.modules.get("cake_drake.world.cameras")
@@ -229,10 +231,11 @@ class OutputWorker:
     ):
         self._blocks = list(blocks)
         self._picture = self._plot = None
-        wanted = spare_core() if helpers == "auto" else helpers == "always"
-        self.forked = wanted and not _gl_here()
+        self.forked = spare_core() if helpers == "auto" else helpers == "always"
         if not self.forked:
             return
+        # After a render engine was made here, the picture is drawn in this process.
+        render = render and not _gl_here()
         try:
             # One helper warms up at a time, so the simulation keeps a core to itself.
             warmed = mp.get_context("fork").Event() if render else None
