@@ -1056,6 +1056,13 @@ in OUT/rounds/round-K. Prints, per round, the episodes, the frames added, the
 expert-labelled frames in all and the learner's success in the round's rollouts. State
 policies only (--inputs state).
 
+--residual fits the dynamic layer's learned residual instead: DATASET... are run folders
+written with outputs.logs: true (their logs.npz); the residual, tau = tau_IDC + r(q, v,
+q_d, v_d, a_d, gripper), is linear in features of the arm's kinematics and fitted by
+least squares to tau_applied - tau_model at the measured state and acceleration, the last
+fifth of each run held out. OUT gets residual.json; a scenario uses it with controller:
+!ComputedTorque {residual: OUT}.
+
 Exit codes: 0 trained; 2 bad input (a dataset lacking what the policy needs, a device
 that is not here, --dagger below 1, --beta outside 0 to 1, --dagger on a dataset with no
 task to roll a policy out on or no kept episodes, DAgger's flags without --dagger); 4 the
@@ -1069,8 +1076,15 @@ def train_parser() -> argparse.ArgumentParser:
         description=TRAIN_DOC,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("dataset", type=Path, help="a recording (python -m cake_drake.record)")
+    p.add_argument(
+        "dataset", type=Path, nargs="+",
+        help="a recording (python -m cake_drake.record); with --residual, run folders",
+    )  # fmt: skip
     p.add_argument("--out", type=Path, required=True, help="the training's folder")
+    p.add_argument(
+        "--residual", action="store_true",
+        help="fit the dynamic layer's residual to run folders written with outputs.logs",
+    )  # fmt: skip
     p.add_argument("--policy", help="mlp | act | diffusion (default: the recipe's)")
     p.add_argument("--inputs", help="state | images | both (default: the recipe's)")
     p.add_argument("--steps", type=int, help="training steps (default: the recipe's)")
@@ -1094,6 +1108,12 @@ def main_train(argv: list[str] | None = None) -> int:
     from cake_drake.learning.train import recipe_of, train
 
     args = train_parser().parse_args(argv)
+    if args.residual:
+        return _main_residual(args)
+    if len(args.dataset) != 1:
+        raise InputError(f"{len(args.dataset)} datasets given; train takes one recording "
+                         "(several run folders go with --residual)")  # fmt: skip
+    args.dataset = args.dataset[0]
     recipe, report = recipe_of(args.dataset)
     given = {
         "policy": args.policy,
@@ -1123,6 +1143,19 @@ def main_train(argv: list[str] | None = None) -> int:
         f"{args.out}: {recipe.policy} ({recipe.inputs}) trained {recipe.steps} steps on "
         f"{args.dataset}; checkpoint {folder}"
     )
+    return EXIT_OK
+
+
+def _main_residual(args: argparse.Namespace) -> int:
+    from cake_drake.learning.residual import describe, train_residual
+
+    policy_only = ("policy", "inputs", "steps", "batch_size", "weights", "dagger")
+    for name in policy_only:
+        if getattr(args, name) is not None:
+            raise InputError(f"--{name.replace('_', '-')} with --residual: it is a policy's "
+                             "setting; a residual is fitted by least squares")  # fmt: skip
+    train_residual(args.dataset, args.out)
+    print(describe(args.out))
     return EXIT_OK
 
 

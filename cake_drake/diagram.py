@@ -365,6 +365,8 @@ def build_diagram(
         # g(q) of the measured arm, for the joint plot: logged as the run goes (C++)
         # rather than computed row by row once it is over.
         "gravity": LogVectorOutput(gravity_term(builder, scene), builder, dt),
+        # The fingers' measured state: whether the hand holds a cube (the residual's data).
+        "hand": LogVectorOutput(plant.get_state_output_port(scene.hand), builder, dt),
     }
     for name in LOGGED_REFERENCE_PORTS:
         loggers[name] = LogVectorOutput(reference.port(name), builder, dt)

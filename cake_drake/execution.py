@@ -23,7 +23,7 @@ from cake_drake.plugins import budget, is_plugin, raised_in_simulation
 from cake_drake.world.cameras import grab
 from cake_drake.world.facts import Reading, read_facts, stack_offsets
 from cake_drake.world.faults import move_cube
-from cake_drake.world.scene import cube_poses
+from cake_drake.world.scene import cube_poses, set_world_parameters
 
 STACK_TOL = 0.005  # m: a stacked cube must stand within this of the one below (xy)
 
@@ -45,6 +45,7 @@ class Logs:
     tau_applied: np.ndarray  # (N, 7) net actuation on the arm joints (PD included)
     tau_requested: np.ndarray | None = None  # (N, 7) actuation asked of the arm, before limits
     gravity: np.ndarray | None = None  # (N, 7) g(q): the torque that holds the arm still
+    fingers: np.ndarray | None = None  # (N,) one finger's measured opening (m)
 
     def saturation(self, limits) -> dict:
         """Per joint: the time (s) the torque sat at its limit, and the peak asked (N m).
@@ -121,6 +122,7 @@ def _logs(cake: CakeDiagram, context) -> Logs:
         tau_applied=rows("tau_applied").T,
         tau_requested=rows("tau_requested").T if "tau_requested" in data else None,
         gravity=rows("gravity").T,
+        fingers=rows("hand")[0] if "hand" in data else None,
     )
 
 
@@ -188,6 +190,8 @@ def execute(
     simulator = Simulator(cake.diagram)
     simulator.set_target_realtime_rate(cake.scenario.visualization.realtime_rate)
     context = simulator.get_mutable_context()
+    plant_context = cake.scene.plant.GetMyMutableContextFromRoot(context)
+    set_world_parameters(cake.scene, plant_context, cake.scenario.world)
     specs = plugin_specs(cake.scenario)
     step_budget = cake.scenario.simulation.step_budget_s
 

@@ -19,6 +19,7 @@ from functools import partial
 from pathlib import Path
 
 from cake_drake.diagram import CakeDiagram, build_diagram
+from cake_drake.dynamic.controllers import per_joint
 from cake_drake.errors import InputError, NoPlanError
 from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
@@ -111,6 +112,10 @@ def _check_numbers(s: Scenario) -> None:
     _range(w.sap_near_rigid_threshold, 0.0, 1.0, "world.sap_near_rigid_threshold")
     _range(w.finger_kp, 1e-3, 1e6, "world.finger_kp", " N/m")
     _range(w.finger_kd, 0.0, 1e5, "world.finger_kd", " N s/m")
+    _range(w.cube_mass_kg, 0.01, 1.0, "world.cube_mass_kg", " kg")
+    _range(w.payload_kg, 0.0, 2.0, "world.payload_kg", " kg")
+    for f in per_joint(w.joint_friction, "world.joint_friction"):
+        _range(f, 0.0, 5.0, "world.joint_friction", " N m s/rad")
     approximations = ("sap", "lagged", "similar", "tamsi")
     if w.contact_approximation not in approximations:
         raise InputError(
@@ -326,6 +331,8 @@ def run_outputs(s: Scenario, generated: str | None) -> set[str]:
         names.add("problem.pddl")
     if s.visualization.meshcat:
         names.add("replay.html")
+    if s.outputs.logs:
+        names.add("logs.npz")
     names |= {f"camera_{c.name}.png" for c in s.cameras}
     return names
 

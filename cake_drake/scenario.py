@@ -193,6 +193,10 @@ class Outputs:
     #: ``auto`` when a core is free (a busy machine gains nothing from them), ``always``
     #: or ``never``. The files are the same either way.
     helpers: str = "auto"
+    #: Write ``logs.npz``: everything the loggers recorded (``t``, ``q``, ``v``, ``q_d``,
+    #: ``v_d``, ``a_d``, ``tau_applied``, ``fingers``, ...), the data a learned residual
+    #: is fitted to (``python -m cake_drake.train --residual``).
+    logs: bool = False
 
 
 @dataclass
@@ -260,6 +264,8 @@ def _scenario_paths(scenario: Scenario):
         yield scenario.reference, "path"
     if isinstance(scenario.reference, Policy) and scenario.reference.checkpoint:
         yield scenario.reference, "checkpoint"
+    if getattr(scenario.controller, "residual", ""):
+        yield scenario.controller, "residual"
 
 
 def resolved(scenario: Scenario, base: Path | None) -> Scenario:

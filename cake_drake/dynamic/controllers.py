@@ -91,12 +91,26 @@ class ComputedTorque:
     kp: list[float] = field(default_factory=lambda: [100.0])
     kd: list[float] = field(default_factory=lambda: [20.0])
     ki: list[float] = field(default_factory=lambda: [0.0])
+    #: A learned residual's folder (:mod:`cake_drake.dynamic.residual`), added to the
+    #: IDC's torque: tau = tau_IDC + r(q, v, q_d, v_d, a_d, gripper). Empty: none.
+    residual: str = ""
     name: ClassVar[str] = "torque"
 
     def check(self) -> None:
         _check_gains(self.kp, self.kd, "controller (ComputedTorque)")
         if np.any(per_joint(self.ki, "controller (ComputedTorque).ki") < 0):
             raise InputError(f"controller (ComputedTorque): ki must be >= 0 (got {self.ki})")
+        if self.residual:
+            self.residual_model()
+
+    def residual_model(self):
+        """The residual (refused in one line, exit 2, when it is none this arm can run)."""
+        from cake_drake.dynamic.residual import ResidualModel, check_bound
+        from cake_drake.scenario import resolve_path
+
+        model = ResidualModel.load(resolve_path(self.residual))
+        check_bound(model.bound_nm, TORQUE_LIMITS, f"controller.residual {self.residual}")
+        return model
 
     def gains(self) -> tuple[np.ndarray, np.ndarray]:
         return per_joint(self.kp, "kp"), per_joint(self.kd, "kd")
@@ -117,10 +131,28 @@ class ComputedTorque:
         )
         builder.Connect(desired_state, controller.get_input_port_desired_state())
         builder.Connect(desired_acceleration, controller.get_input_port_desired_acceleration())
-        builder.Connect(
-            controller.get_output_port_control(), scene.plant.get_actuation_input_port(scene.arm)
+        tau = controller.get_output_port_control()
+        if self.residual:
+            tau = self._add_residual(builder, scene, desired_acceleration, tau)
+        builder.Connect(tau, scene.plant.get_actuation_input_port(scene.arm))
+        return tau
+
+    def _add_residual(self, builder, scene, desired_acceleration, tau_idc) -> OutputPort:
+        from cake_drake.dynamic.residual import ResidualTorque
+
+        residual = builder.AddNamedSystem(
+            "residual", ResidualTorque(self.residual_model(), scene.control_plant, self.residual)
         )
-        return controller.get_output_port_control()
+        plant = scene.plant
+        builder.Connect(plant.get_state_output_port(scene.arm), residual.GetInputPort("arm_state"))
+        builder.Connect(
+            plant.get_state_output_port(scene.hand), residual.GetInputPort("hand_state")
+        )
+        builder.Connect(desired_acceleration, residual.GetInputPort("desired_acceleration"))
+        total = builder.AddNamedSystem("idc_plus_residual", Adder(2, 7))
+        builder.Connect(tau_idc, total.get_input_port(0))
+        builder.Connect(residual.GetOutputPort("residual_torque"), total.get_input_port(1))
+        return total.get_output_port()
 
 
 @dataclass

@@ -49,6 +49,7 @@ from cake_drake.errors import InputError
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, MAX_CUBES
 from cake_drake.world.cameras import Camera, default_cameras
+from cake_drake.world.scene import set_world_parameters
 
 OBS_MODES = ("state", "rgb", "state+rgb")
 STATE_SIZE = 22
@@ -232,6 +233,11 @@ class StackEnv(gymnasium.Env):
         #: What a policy is told at its reset (a policy that plans reads the problem here).
         self.policy_task = self._source.task
         self._simulator = Simulator(self._cake.diagram)
+        scene = self._cake.scene
+        plant_context = scene.plant.GetMyMutableContextFromRoot(
+            self._simulator.get_mutable_context()
+        )
+        set_world_parameters(scene, plant_context, scenario.world)
         self._simulator.Initialize()
         self._context = self._simulator.get_context()
         self._source_context = self._source.GetMyContextFromRoot(self._context)

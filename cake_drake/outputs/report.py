@@ -43,6 +43,27 @@ def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str
     return samples, list(execution.actions)
 
 
+def layers(scenario, plan) -> dict:
+    """Each layer of the cake, classical (which one) or learned (which checkpoint): the
+    label the chapter asks a student to put on every layer of a system."""
+    from cake_drake.scenario import Policy
+
+    reference = scenario.reference
+    if isinstance(reference, Policy):
+        what = reference.checkpoint or reference.factory
+        symbolic = geometric = {"kind": "learned", "what": f"whole-task policy ({what})"}
+    else:
+        symbolic = {"kind": "classical", "what": getattr(plan, "planner", None)}
+        geometric = {"kind": "classical", "what": f"waypoints and IK ({scenario.motion.ik})"}
+    residual = getattr(scenario.controller, "residual", "")
+    if residual:
+        dynamic = {"kind": "learned", "what": f"residual on computed torque ({residual})"}
+    else:
+        name = getattr(scenario.controller, "factory", "") or type(scenario.controller).__name__
+        dynamic = {"kind": "classical", "what": name}
+    return {"symbolic": symbolic, "geometric": geometric, "dynamic": dynamic}
+
+
 def summary(result) -> dict:
     """The content of ``summary.json`` for a :class:`cake_drake.pipeline.RunResult`."""
     plan, cake, execution, stages = result.plan, result.cake, result.execution, result.stages
@@ -64,6 +85,7 @@ def summary(result) -> dict:
             "name": controller.name,
             "gains": _gains(controller),
         },
+        "layers": layers(scenario, result.plan),
         "ik": scenario.motion.ik if cake.ik is not None else None,
         "reference": getattr(scenario.reference, "path", None),
         "scenario": "scenario.yaml",
@@ -211,6 +233,9 @@ def write_outputs(
         out.write_text("scenario.yaml", dump_scenario(cake.scenario))
         samples, actions = trajectory_samples(cake, execution)
         save_npz(out.path("trajectory.npz"), samples, actions)
+        if cake.scenario.outputs.logs:
+            arrays = {k: v for k, v in vars(logs).items() if isinstance(v, np.ndarray)}
+            np.savez_compressed(out.path("logs.npz"), **arrays)
     except (OSError, InputError) as e:
         raise OutputError(f"{out.out}: cannot write the outputs ({e})") from None
     for name, image in execution.frames.items():

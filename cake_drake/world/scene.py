@@ -32,13 +32,19 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
     MultibodyPlantConfig,
 )
-from pydrake.multibody.tree import FixedOffsetFrame, ModelInstanceIndex, PdControllerGains
+from pydrake.multibody.tree import (
+    FixedOffsetFrame,
+    ModelInstanceIndex,
+    PdControllerGains,
+    SpatialInertia,
+)
 from pydrake.systems.framework import DiagramBuilder
 
 from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError
 
 CUBE_SIZE = 0.04  # m, edge of every cube
+CUBE_MASS = 0.05  # kg, every cube's mass in models/cubes/cube.urdf
 #: Every block is an instance of this one model; its colour is set per instance.
 CUBE_MODEL = "package://cake_drake/cubes/cube.urdf"
 #: The first eight cube colours, by name (blocks take colours in natural order of their
@@ -166,6 +172,14 @@ class WorldConfig:
     slot_spacing_max: float = SLOT_SPACING_MAX  # m between them, at most (few slots needed)
     #: Seeded variation of the cubes' start (learning tasks): none by default.
     placement: Placement = field(default_factory=Placement)
+    #: What the simulated world has and the controllers' model (the 7-DOF arm of
+    #: :func:`make_control_plant`) lacks, on purpose: the cubes' true mass (kg; the model
+    #: knows no cube at all), a payload rigidly at the grasp frame (kg), and viscous joint
+    #: friction on the arm's seven joints (N m s/rad, one value or seven). The defaults are
+    #: the world as it is (the URDFs' own values).
+    cube_mass_kg: float = CUBE_MASS
+    payload_kg: float = 0.0
+    joint_friction: list[float] = field(default_factory=lambda: [0.0])
 
     @property
     def slots(self) -> tuple[tuple[float, float], ...]:
@@ -333,6 +347,7 @@ def add_world(
         for i, (kp, kd) in enumerate(zip(*arm_gains, strict=True), start=1):
             actuator = plant.GetJointActuatorByName(f"panda_motor{i}", arm)
             actuator.set_controller_gains(PdControllerGains(p=kp, d=kd))
+    _add_mismatch(plant, arm, hand, config)
     plant.Finalize()
     robot = _filter_robot_collisions(plant, scene_graph, arm, hand)
     if not cube_boxes:
@@ -341,11 +356,37 @@ def add_world(
     return Scene(plant, scene_graph, arm, hand, cubes)
 
 
+def _add_mismatch(plant: MultibodyPlant, arm, hand, config: WorldConfig) -> None:
+    """The payload and the joint friction of ``config`` (see :class:`WorldConfig`); the
+    cubes' mass is a parameter of the context (:func:`set_world_parameters`)."""
+    if config.payload_kg > 0:
+        body = plant.AddRigidBody(
+            "payload", hand, SpatialInertia.SolidBoxWithMass(config.payload_kg, 0.02, 0.02, 0.02)
+        )
+        plant.WeldFrames(plant.GetFrameByName("grasp", hand), body.body_frame())
+    friction = [float(f) for f in config.joint_friction]
+    if any(friction):
+        friction = friction * 7 if len(friction) == 1 else friction
+        for i, f in enumerate(friction, start=1):
+            joint = plant.GetJointByName(f"panda_joint{i}", arm)
+            joint.set_default_damping_vector(joint.default_damping_vector() + f)
+
+
+def set_world_parameters(scene: Scene, plant_context, config: WorldConfig) -> None:
+    """The cubes' true mass (``config.cube_mass_kg``), set in ``plant_context`` (a body's
+    mass is a parameter of the context): a solid 4 cm cube of that mass."""
+    if config.cube_mass_kg == CUBE_MASS:
+        return  # the URDF's own cube, untouched
+    inertia = SpatialInertia.SolidBoxWithMass(config.cube_mass_kg, CUBE_SIZE, CUBE_SIZE, CUBE_SIZE)
+    for instance in scene.cubes.values():
+        body = scene.plant.GetBodyByName("cube", instance)
+        body.SetSpatialInertiaInBodyFrame(plant_context, inertia)
+
+
 def _add_box_cube(plant: MultibodyPlant, name: str) -> ModelInstanceIndex:
     """A free cube ``block_<name>`` that is only its box (see :func:`add_world`)."""
     from pydrake.geometry import Box
     from pydrake.multibody.plant import CoulombFriction
-    from pydrake.multibody.tree import SpatialInertia
 
     instance = plant.AddModelInstance(f"block_{name}")
     inertia = SpatialInertia.SolidBoxWithMass(0.08, CUBE_SIZE, CUBE_SIZE, CUBE_SIZE)
