@@ -101,7 +101,7 @@ $(RUN_STAMP): pyproject.toml | $(VENV)/bin/python
 $(TEST_STAMP): $(RUN_STAMP)
 	@$(PY) -c '$(call python_ok,12)' || { echo "error: .venv is $$($(PY) -V 2>&1), and make \
 	  test needs Python 3.12 or newer: remove it (make clean), then make test again" >&2; exit 1; }
-	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m pip install --quiet -e '.[test]' -e plugins/lerobot_env_cake_drake
 	touch $(TEST_STAMP)
 
 # The package's bytecode, compiled here rather than by each run: an editable install

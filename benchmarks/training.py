@@ -117,7 +117,7 @@ def main() -> None:
     recipe = load_scenario(LEARNING, args.task).training
     steps = args.steps or recipe.steps
     keys = training.check(data, Path(tempfile.mkdtemp()) / "x", recipe, "cpu", False)
-    import cake_drake.learning.mlp  # noqa: F401 - registers cake_mlp
+    import cake_drake.learning.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
 
     config = training._policy_config(recipe, "cpu", None)
     base = lerobot_dataset(data, config)

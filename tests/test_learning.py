@@ -296,6 +296,27 @@ def test_plain_lerobot_train_trains_on_a_recording(trained, tmp_path):
     check_folder(tmp_path / "stack2_lerobot", "joint_position", "cpu")  # evaluate takes it
 
 
+LEROBOT_EVAL = "lerobot-eval --policy.path=models/policies/stack2 --env.type=cake_drake --env.task=stack2 --eval.n_episodes=2 --eval.batch_size=1 --policy.device=cpu --output_dir=stack2_eval"  # noqa: E501 - verbatim
+
+
+@pytest.mark.slow
+def test_lerobot_eval_runs_a_checkpoint_on_the_tasks(tmp_path):
+    """LeRobot's own evaluation, with the environment type the plug-in distribution
+    registers (make test installs it): the shipped policy reaches the goal twice."""
+    import shlex
+
+    shutil.copytree(ROOT / "models", tmp_path / "models")
+    argv = shlex.split(LEROBOT_EVAL)[1:]  # lerobot-eval, the venv's console script
+    exe = Path(sys.executable).parent / "lerobot-eval"
+    r = subprocess.run(
+        [str(exe), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+        env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-3000:]
+    info = json.loads((tmp_path / "stack2_eval" / "eval_info.json").read_text())
+    assert info["overall"]["pc_success"] == 100.0 and info["overall"]["n_episodes"] == 2
+
+
 # --- bad input: one line, exit 2 -------------------------------------------------------------
 
 

@@ -115,11 +115,22 @@ class CheckpointPolicy:
         self._policy = None
 
     def _load(self) -> None:
+        config = _config(self.folder)
+        if config.get("type") == "cake_mlp":
+            # The project's own MLP acts from torch alone: its LeRobot processors are the
+            # identity (it standardises itself), and LeRobot's policy factory would import
+            # every policy type (torchvision, diffusers: seconds a process).
+            from cake_drake.learning.mlp.network import load
+
+            self._policy = load(self.folder, self.device)
+            self._pre = self._post = None
+            self._inputs = dict(config["input_features"])
+            return
         import torch  # noqa: F401 - lerobot's policies are torch modules
         from lerobot.configs.policies import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
-        import cake_drake.learning.mlp  # noqa: F401 - registers the cake_mlp policy type
+        import cake_drake.learning.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
 
         config = PreTrainedConfig.from_pretrained(self.folder)
         config.device = self.device
@@ -140,8 +151,9 @@ class CheckpointPolicy:
         if self._policy is None:
             self._load()
         self._policy.reset()  # a new episode: no actions left from the last one
-        self._pre.reset()
-        self._post.reset()
+        if self._pre is not None:
+            self._pre.reset()
+            self._post.reset()
 
     def batch(self, observation) -> dict:
         """The policy's inputs from a slot or Gym observation, batched (1, ...)."""
@@ -172,8 +184,11 @@ class CheckpointPolicy:
         import torch
 
         with torch.inference_mode():
-            action = self._policy.select_action(self._pre(self.batch(observation)))
-            action = self._post(action)
+            if self._pre is None:
+                batch = {k: v.to(self.device) for k, v in self.batch(observation).items()}
+                action = self._policy.select_action(batch)
+            else:
+                action = self._post(self._policy.select_action(self._pre(self.batch(observation))))
         return action.squeeze(0).cpu().numpy().astype(np.float64)
 
 

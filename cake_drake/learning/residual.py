@@ -95,7 +95,8 @@ def describe(out: Path) -> str:
     )
     shown = lambda v: "/".join(f"{x:.2f}" for x in v)  # noqa: E731
     return (
-        f"{out}: residual fitted on {len(data['runs'])} runs ({data['samples']} samples); "
+        f"{out}: residual fitted on {len(data['runs'])} run{'s' * (len(data['runs']) != 1)} "
+        f"({data['samples']} samples); "
         f"the model's error on the held-out samples while holding, joints 1-7 (N m RMS): "
         f"{shown(before)} without it, {shown(after)} with it"
     )

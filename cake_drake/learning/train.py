@@ -149,7 +149,7 @@ def _policy_config(recipe: Training, device: str, weights: str | None):
             optimizer_lr_backbone=recipe.lr,
         )
     if recipe.policy == "mlp":
-        from cake_drake.learning.mlp import CakeMLPConfig
+        from cake_drake.learning.mlp.configuration_mlp import CakeMLPConfig
 
         return CakeMLPConfig(
             device=device,
@@ -211,7 +211,7 @@ def train(
     from lerobot.scripts.lerobot_train import train as lerobot_train
     from lerobot.utils.feature_utils import dataset_to_policy_features
 
-    import cake_drake.learning.mlp  # noqa: F401 - registers the cake_mlp policy type
+    import cake_drake.learning.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
     from cake_drake.learning.batches import fast_batches
 
     out = Path(out)

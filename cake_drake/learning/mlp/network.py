@@ -1,0 +1,150 @@
+"""The ``cake_mlp`` policy's network and action queue in torch alone, without LeRobot.
+
+:class:`Chunks` holds the policy's arithmetic: standardised inputs over the last
+``n_obs_steps`` observations, a chunk of ``chunk_size`` actions out (the arm's joints as
+offsets from the measured ones), ``n_action_steps`` of them served before the next
+chunk. LeRobot's wrapper (:class:`cake_drake.learning.mlp.modeling_mlp.CakeMLPPolicy`)
+trains it through LeRobot's loop; :func:`load` builds the same network from a checkpoint
+folder (its ``config.json`` and ``model.safetensors``, the same weights under the same
+names) for a run or an evaluation to act with, without importing LeRobot's policies
+(which bring torchvision, diffusers and every other policy type: seconds a process).
+"""
+
+from __future__ import annotations
+
+import json
+from collections import deque
+from pathlib import Path
+from types import SimpleNamespace
+
+import torch
+from torch import Tensor, nn
+
+#: The arm's joints in a joint_position action (the gripper's width follows).
+ARM = 7
+OBS_STATE = "observation.state"
+OBS_ENV_STATE = "observation.environment_state"
+ACTION = "action"
+
+
+def _stats(stats: dict | None, key: str, size: int, floor: float) -> tuple[Tensor, Tensor]:
+    """Mean and floored spread of feature ``key`` (zeros and ones when there are none: a
+    policy loaded from a checkpoint gets its statistics from the weights)."""
+    if stats and key in stats:
+        mean = torch.as_tensor(stats[key]["mean"], dtype=torch.float32).reshape(size)
+        std = torch.as_tensor(stats[key]["std"], dtype=torch.float32).reshape(size)
+        return mean, std.clamp_min(floor)
+    return torch.zeros(size), torch.ones(size)
+
+
+class Chunks:
+    """The policy's arithmetic, mixed into an ``nn.Module`` with a ``config`` (the fields
+    of :class:`cake_drake.learning.mlp.CakeMLPConfig`)."""
+
+    def build(self, config, state: int, env: int, action_dim: int, stats=None) -> None:
+        """The statistics (buffers, saved with the weights) and the layers."""
+        self.config = config
+        self.action_dim = action_dim
+        if config.relative_joints and (action_dim < ARM or state < ARM):
+            raise ValueError("relative_joints needs 7 arm joints in the state and the action")
+        for name, key, size in (
+            ("state", OBS_STATE, state),
+            ("env", OBS_ENV_STATE, env),
+            ("action", ACTION, action_dim),
+        ):
+            mean, std = _stats(stats, key, size, config.min_std)
+            self.register_buffer(f"{name}_mean", mean)
+            self.register_buffer(f"{name}_std", std)
+        layers: list[nn.Module] = []
+        width = (state + env) * config.n_obs_steps
+        for hidden in config.hidden_dims:
+            layers += [nn.Linear(width, hidden), nn.GELU()]
+            if config.dropout:
+                layers.append(nn.Dropout(config.dropout))
+            width = hidden
+        layers.append(nn.Linear(width, config.chunk_size * action_dim))
+        self.net = nn.Sequential(*layers)
+        self.reset()
+
+    def reset(self) -> None:
+        self._queue: deque[Tensor] = deque([], maxlen=self.config.n_action_steps)
+        self._seen: deque[dict[str, Tensor]] = deque([], maxlen=self.config.n_obs_steps)
+
+    def _inputs(self, batch: dict[str, Tensor]) -> Tensor:
+        """The standardised observations, oldest first, side by side: (B, n_obs_steps * D)."""
+        state = (batch[OBS_STATE] - self.state_mean) / self.state_std
+        env = (batch[OBS_ENV_STATE] - self.env_mean) / self.env_std
+        x = torch.cat([state, env], dim=-1)
+        if x.dim() == 3:  # (B, n_obs_steps, D): the frames before the current one
+            x = x.flatten(1)
+        if self.training and self.config.input_noise:
+            x = x + self.config.input_noise * torch.randn_like(x)
+        return x
+
+    def _origin(self, batch: dict[str, Tensor]) -> Tensor:
+        """What the network's standardised output is measured from: the measured joints
+        (relative) or the dataset's mean action, (B, 1, action_dim)."""
+        now = batch[OBS_STATE] if batch[OBS_STATE].dim() == 2 else batch[OBS_STATE][:, -1]
+        origin = self.action_mean.expand(now.shape[0], -1).clone()
+        if self.config.relative_joints:
+            origin[:, :ARM] = now[:, :ARM]
+        return origin.unsqueeze(1)
+
+    def _chunk(self, batch: dict[str, Tensor]) -> Tensor:
+        """The standardised chunk, (B, chunk_size, action_dim)."""
+        out = self.net(self._inputs(batch))
+        return out.view(-1, self.config.chunk_size, self.action_dim)
+
+    @torch.no_grad()
+    def predict_action_chunk(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        self.eval()
+        return self._origin(batch) + self._chunk(batch) * self.action_std
+
+    @torch.no_grad()
+    def select_action(self, batch: dict[str, Tensor], **kwargs) -> Tensor:
+        """One action; a new chunk when the last one's ``n_action_steps`` are spent. Every
+        observation is kept for the next chunk's history (the first repeated before it, as
+        LeRobot pads an episode's start)."""
+        self.eval()
+        now = {k: batch[k] for k in (OBS_STATE, OBS_ENV_STATE)}
+        while len(self._seen) < self.config.n_obs_steps - 1:
+            self._seen.append(now)
+        self._seen.append(now)
+        if not self._queue:
+            frames = {k: torch.stack([seen[k] for seen in self._seen], dim=1) for k in now}
+            chunk = self.predict_action_chunk(frames)[:, : self.config.n_action_steps]
+            self._queue.extend(chunk.transpose(0, 1))
+        return self._queue.popleft()
+
+
+class CakeMLPNetwork(Chunks, nn.Module):
+    """The network alone, built from a checkpoint's configuration (:func:`load`)."""
+
+    def __init__(self, config, state: int, env: int, action_dim: int) -> None:
+        nn.Module.__init__(self)
+        self.build(config, state, env, action_dim)
+
+
+def _shape(features: dict, key: str) -> int:
+    return int(features[key]["shape"][0])
+
+
+def load(folder: Path, device: str = "cpu") -> CakeMLPNetwork:
+    """The ``cake_mlp`` checkpoint in ``folder`` as a :class:`CakeMLPNetwork`."""
+    from safetensors.torch import load_file
+
+    folder = Path(folder)
+    data = json.loads((folder / "config.json").read_text())
+    config = SimpleNamespace(**{
+        k: data.get(k, default) for k, default in (
+            ("n_obs_steps", 1), ("chunk_size", 10), ("n_action_steps", 5),
+            ("hidden_dims", [512, 512, 512]), ("dropout", 0.0), ("relative_joints", True),
+            ("min_std", 0.01), ("input_noise", 0.0),
+        )
+    })  # fmt: skip
+    inputs, outputs = data["input_features"], data["output_features"]
+    network = CakeMLPNetwork(
+        config, _shape(inputs, OBS_STATE), _shape(inputs, OBS_ENV_STATE), _shape(outputs, ACTION)
+    )
+    network.load_state_dict(load_file(str(folder / "model.safetensors")), strict=True)
+    return network.to(device).eval()
