@@ -277,17 +277,22 @@ def test_a_checkpoint_acts_in_evaluate_a_run_and_the_gym_env(trained, tmp_path):
 LEROBOT_TRAIN = "lerobot-train --dataset.repo_id=cake_drake/stack2 --dataset.root=stack2_demos --dataset.video_backend=pyav --policy.type=act --policy.pretrained_backbone_weights=null --policy.push_to_hub=false --policy.device=cpu --policy.dim_model=64 --policy.dim_feedforward=128 --steps=2 --batch_size=2 --output_dir=stack2_lerobot"  # noqa: E501 - verbatim
 
 
-@pytest.mark.slow
-def test_plain_lerobot_train_trains_on_a_recording(trained, tmp_path):
+def lerobot_cli(line: str, cwd: Path):
+    """A documented LeRobot command line, verbatim, with the venv's console script."""
     import shlex
 
-    shutil.copytree(trained / "ds", tmp_path / "stack2_demos")
-    argv = shlex.split(LEROBOT_TRAIN)[1:]  # lerobot-train, the venv's console script
-    exe = Path(sys.executable).parent / "lerobot-train"
-    r = subprocess.run(
-        [str(exe), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=600,
+    name, *argv = shlex.split(line)
+    exe = Path(sys.executable).parent / name
+    return subprocess.run(
+        [str(exe), *argv], cwd=cwd, capture_output=True, text=True, timeout=600,
         env={**os.environ, "HF_HUB_OFFLINE": "1"},
     )  # fmt: skip
+
+
+@pytest.mark.slow
+def test_plain_lerobot_train_trains_on_a_recording(trained, tmp_path):
+    shutil.copytree(trained / "ds", tmp_path / "stack2_demos")
+    r = lerobot_cli(LEROBOT_TRAIN, tmp_path)
     assert r.returncode == 0, r.stderr[-2000:]
     model = tmp_path / "stack2_lerobot" / "checkpoints" / "last" / "pretrained_model"
     assert (model / "config.json").is_file()
@@ -303,15 +308,8 @@ LEROBOT_EVAL = "lerobot-eval --policy.path=models/policies/stack2 --env.type=cak
 def test_lerobot_eval_runs_a_checkpoint_on_the_tasks(tmp_path):
     """LeRobot's own evaluation, with the environment type the plug-in distribution
     registers (make test installs it): the shipped policy reaches the goal twice."""
-    import shlex
-
     shutil.copytree(ROOT / "models", tmp_path / "models")
-    argv = shlex.split(LEROBOT_EVAL)[1:]  # lerobot-eval, the venv's console script
-    exe = Path(sys.executable).parent / "lerobot-eval"
-    r = subprocess.run(
-        [str(exe), *argv], cwd=tmp_path, capture_output=True, text=True, timeout=600,
-        env={**os.environ, "HF_HUB_OFFLINE": "1"},
-    )  # fmt: skip
+    r = lerobot_cli(LEROBOT_EVAL, tmp_path)
     assert r.returncode == 0, r.stderr[-3000:]
     info = json.loads((tmp_path / "stack2_eval" / "eval_info.json").read_text())
     assert info["overall"]["pc_success"] == 100.0 and info["overall"]["n_episodes"] == 2
