@@ -46,15 +46,19 @@ def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str
 def layers(scenario, plan) -> dict:
     """Each layer of the cake, classical (which one) or learned (which checkpoint): the
     label the chapter asks a student to put on every layer of a system."""
-    from cake_drake.scenario import Policy
+    from cake_drake.scenario import Policy, Recorded
 
-    reference = scenario.reference
+    reference, motion = scenario.reference, scenario.motion
     if isinstance(reference, Policy):
         what = reference.checkpoint or reference.factory
         symbolic = geometric = {"kind": "learned", "what": f"whole-task policy ({what})"}
     else:
         symbolic = {"kind": "classical", "what": getattr(plan, "planner", None)}
-        geometric = {"kind": "classical", "what": f"waypoints and IK ({scenario.motion.ik})"}
+        if isinstance(reference, Recorded):
+            moves = f"a recorded trajectory ({reference.path})"
+        else:
+            moves = f"waypoints, IK ({motion.ik}), {motion.planner} moves"
+        geometric = {"kind": "classical", "what": moves}
     residual = getattr(scenario.controller, "residual", "")
     if residual:
         dynamic = {"kind": "learned", "what": f"residual on computed torque ({residual})"}
