@@ -327,6 +327,10 @@ def test_a_dataset_without_the_features_a_policy_needs_is_refused(trained, tmp_p
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "images",
              "--policy", "act")  # fmt: skip
     one_line(r, 2, "no camera features, which --inputs images needs")
+    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--steps", "0")
+    one_line(r, 2, "--steps 0: a whole number, 1 to 10000000")
+    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--batch-size", "4000")
+    one_line(r, 2, "--batch-size 4000: larger than")
     info = json.loads((ds / "meta" / "info.json").read_text())
     del info["features"]["observation.environment_state"]
     (ds / "meta" / "info.json").write_text(json.dumps(info))

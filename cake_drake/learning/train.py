@@ -118,6 +118,10 @@ def check(
             f"({recipe.chunk_size})"
         )
     keys = input_keys(_features(root), recipe.inputs, root)
+    frames = json.loads((root / "meta" / "info.json").read_text()).get("total_frames", 0)
+    if isinstance(frames, int) and recipe.batch_size > frames:
+        raise InputError(f"--batch-size {recipe.batch_size}: larger than {root}'s {frames} "
+                         "frames; at most the frames the recording holds")  # fmt: skip
     last = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
     if resume and not last.is_file():
         raise InputError(f"{out}: no checkpoint to resume (no {last.relative_to(out)})")
