@@ -55,9 +55,8 @@ def recipe_of(root: Path) -> tuple[Training, dict]:
     return Training(**known), report
 
 
-def _features(root: Path) -> dict:
-    info = json.loads((Path(root) / "meta" / "info.json").read_text())
-    return info["features"]
+def _info(root: Path) -> dict:
+    return json.loads((Path(root) / "meta" / "info.json").read_text())
 
 
 def input_keys(features: dict, inputs: str, root: Path) -> list[str]:
@@ -117,8 +116,9 @@ def check(
             f"training.n_action_steps {recipe.n_action_steps}: 1 to chunk_size "
             f"({recipe.chunk_size})"
         )
-    keys = input_keys(_features(root), recipe.inputs, root)
-    frames = json.loads((root / "meta" / "info.json").read_text()).get("total_frames", 0)
+    info = _info(root)
+    keys = input_keys(info["features"], recipe.inputs, root)
+    frames = info.get("total_frames", 0)
     if isinstance(frames, int) and recipe.batch_size > frames:
         raise InputError(f"--batch-size {recipe.batch_size}: larger than {root}'s {frames} "
                          "frames; at most the frames the recording holds")  # fmt: skip
