@@ -25,8 +25,6 @@ from cake_drake.world.facts import Reading, read_facts, stack_offsets
 from cake_drake.world.faults import move_cube
 from cake_drake.world.scene import cube_poses, set_world_parameters
 
-STACK_TOL = 0.005  # m: a stacked cube must stand within this of the one below (xy)
-
 
 @dataclass
 class Logs:
@@ -129,14 +127,28 @@ def _logs(cake: CakeDiagram, context) -> Logs:
 class ProgressBar:
     """A one-line progress bar on stderr (redrawn on a terminal, sparse lines otherwise)."""
 
-    def __init__(self, n_actions: int, describe: Callable[[int], str], enabled: bool = True):
+    def __init__(
+        self,
+        n_actions: int,
+        describe: Callable[[int], str],
+        enabled: bool = True,
+        unit: str = "action",
+    ):
+        #: ``action``: the plan's actions (a planned run); ``step``: a whole-task policy's
+        #: steps, counted against its budget of ``n_actions`` steps.
         self.n = n_actions
         self.describe = describe
         self.enabled = enabled
+        self.unit = unit
         self.tty = sys.stderr.isatty()
         self._last_line = -math.inf  # the first update prints: the simulation has begun
 
-    def update(self, sim_t: float, wall: float, done: int, final: bool = False) -> None:
+    def update(
+        self, sim_t: float, wall: float, done: int, final: bool = False, note: str = ""
+    ) -> None:
+        """Draw the line: ``done`` actions (or policy steps) so far; ``note`` says what the
+        geometric layer is doing (a learned skill's action and its steps in it), in place
+        of the plan's action at ``done``."""
         if not self.enabled:
             return
         # A run that recovers executes more actions than its plan had: the bar is full
@@ -145,7 +157,11 @@ class ProgressBar:
         bar = "#" * int(20 * frac) + "." * (20 - int(20 * frac))
         rtf = sim_t / wall if wall > 0 else 0.0
         what = self.describe(done) if done < self.n else "done"
-        if final or done < self.n:
+        if self.unit == "step":
+            step = f"policy step {done}/{self.n}" + (" done" if final else "")
+        elif note and not final:  # the geometric layer says what it is doing
+            step = f"action {done + 1}{f'/{self.n}' if done < self.n else f' of {self.n}+'} {note}"
+        elif final or done < self.n:
             step = f"action {min(done + 1, self.n)}/{self.n} {what}"
         else:
             step = f"action {done + 1} of {self.n}+ (recovering)"
@@ -225,7 +241,7 @@ def execute(
             move_cube(plant, plant_context, cake.scene.cube_body(m.cube), m.x, m.y)
         done, finished, error, warnings = cake.reference.status(context)
         if progress:
-            progress.update(t, time.perf_counter() - t0, done)
+            progress.update(t, time.perf_counter() - t0, done, note=cake.reference.note(context))
         if error is not None or finished or t >= max_sim_s:
             break
     if error is None and not finished:

@@ -21,11 +21,14 @@ from pathlib import Path
 from cake_drake.diagram import CakeDiagram, build_diagram
 from cake_drake.dynamic.controllers import per_joint
 from cake_drake.errors import InputError, NoPlanError
-from cake_drake.execution import STACK_TOL, Execution, ProgressBar, execute
+from cake_drake.execution import Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
 from cake_drake.plugins import PluginError, is_plugin, load_attribute, resolve
 from cake_drake.scenario import (
+    CHECKPOINT_CHECK,
+    CHECKPOINT_POLICY,
     HELPER_CHOICES,
+    SKILL_CHECK,
     Generate,
     Policy,
     Recorded,
@@ -55,6 +58,7 @@ from cake_drake.symbolic import (
 from cake_drake.symbolic.planners import overran_time_limit
 from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.cameras import check_cameras
+from cake_drake.world.facts import STACK_TOL, read_goal
 from cake_drake.world.faults import Move, RandomFault, Slip, check_faults, resolve_random
 from cake_drake.world.scene import jittered, layout
 
@@ -272,6 +276,8 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
         resolve(s.reference.action_source, ACTION_SOURCES, "action source")
         resolve(s.motion.ik, SOLVERS, "IK solver")
         make_planner(s.motion.planner)
+        if s.motion.skills:
+            check_skills(s.motion)
     view = blocksworld_view(problem)
     check_faults([f for f in s.faults if not isinstance(f, Slip)], view.blocks, n_actions=1 << 30)
     out = Path(s.outputs.folder) if write else None
@@ -280,9 +286,13 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     return Checked(s, problem, planner, out, generated)
 
 
-#: The adapter that runs a LeRobot checkpoint in the slot, and its folder check.
-CHECKPOINT_POLICY = "cake_drake.learning.checkpoint:make"
-CHECKPOINT_CHECK = "cake_drake.learning.checkpoint:check_folder"
+def check_skills(motion) -> None:
+    """A learned geometric layer that can run: a skill checkpoint (not a whole-task
+    policy), a rate and a budget in range."""
+    check_folder = load_attribute(SKILL_CHECK, "skill")
+    check_folder(resolve_path(motion.skills), motion.skill_device)
+    _range(motion.skill_rate_hz, 0.5, 100.0, "motion.skill_rate_hz", " Hz")
+    _range(motion.skill_max_steps, 0, 1_000_000, "motion.skill_max_steps")
 
 
 def check_policy(ref: Policy) -> None:
@@ -467,14 +477,12 @@ def verdict(problem: Problem, execution: Execution) -> tuple[bool, list[str], st
     """
     if execution.error is not None:
         return False, [], execution.error
-    facts = execution.reading.facts
     view = blocksworld_view(problem)
-    missing = view.goal - facts
-    unmet = [fact_str(f) for f in sorted(view.roles.from_canonical(missing))]
+    goal = read_goal(execution.poses, view.goal, reading=execution.reading)
+    unmet = [fact_str(f) for f in sorted(view.roles.from_canonical(goal.missing))]
     loose = [
         f"{b} stands {off * 1000:.1f} mm off the cube below (tolerance {STACK_TOL * 1000:.0f} mm)"
-        for b, off in sorted(execution.offsets.items())
-        if off > STACK_TOL and any(g[0] == "on" and g[1] == b for g in view.goal)
+        for b, off in sorted(goal.loose.items())
     ]
     if unmet or loose:
         parts = [execution.ended] if execution.ended else []
@@ -563,9 +571,14 @@ def run(
         stages["diagram_build"] = time.perf_counter() - t
 
         names = cake.reference.actions
-        progress = ProgressBar(
-            len(names), lambda k: f"({names[k]})" if k < len(names) else "", enabled=not quiet
-        )
+        if cake.reference.policy is not None:  # a whole-task policy: its steps, its budget
+            progress = ProgressBar(
+                cake.reference.policy.max_steps, lambda k: "", enabled=not quiet, unit="step"
+            )
+        else:
+            progress = ProgressBar(
+                len(names), lambda k: f"({names[k]})" if k < len(names) else "", enabled=not quiet
+            )
         if meshcat is not None:
             from cake_drake.outputs.replay import start_recording
 

@@ -99,6 +99,15 @@ class Motion:
     #: (grasps and places chosen free, blocked moves planned with OMPL) or
     #: module:attribute (a factory ``() -> planner``, see cake_drake.geometric.planners).
     planner: str = "straight"
+    #: The geometric layer learned: a skill checkpoint (a folder from ``python -m
+    #: cake_drake.train --inputs skill``) executes each ground action in place of the
+    #: waypoints and IK above (cake_drake.systems.skills); empty: the classical layer.
+    skills: str = ""
+    skill_rate_hz: float = 10.0  # how often the skill is asked (its recording's rate)
+    #: Control periods one action may take before it is handed back to the action source
+    #: (0: 150, 15 s at 10 Hz).
+    skill_max_steps: int = 0
+    skill_device: str = "cpu"  # where the skill runs: cpu | cuda | auto
 
 
 @dataclass
@@ -110,6 +119,12 @@ class Planned:
     #: ``(SourceContext) -> System`` (see :func:`cake_drake.systems.make_action_source`).
     action_source: str = "monitor"
     max_replans: int = 5  # the monitor's budget of replans in one run
+    #: The monitor sets a goal's stacked cube down again when it stands farther off the
+    #: one below than the verdict allows (a replan: the cubes above it to the table, then
+    #: it picked and stacked once more). Off by default: a classical place is precise to
+    #: about a millimetre; learned skills (motion.skills) are not, and the shipped
+    #: learned_tower5 turns it on.
+    re_place: bool = False
 
 
 @dataclass
@@ -231,6 +246,14 @@ class Scenario:
 # --- paths -------------------------------------------------------------------------------
 
 
+#: The learned layers' adapters, through the plug-in door (nothing outside learning/
+#: imports them): a whole-task policy's checkpoint, a learned skill's; and their checks.
+CHECKPOINT_POLICY = "cake_drake.learning.checkpoint:make"
+CHECKPOINT_CHECK = "cake_drake.learning.checkpoint:check_folder"
+SKILL_POLICY = "cake_drake.learning.skills:make"
+SKILL_CHECK = "cake_drake.learning.skills:check_folder"
+
+
 def resolve_path(path: str, base: Path | None = None) -> Path:
     """A scenario path as a file system path (``package://cake_drake/`` is ``models/``)."""
     if path.startswith(PACKAGE):
@@ -266,6 +289,8 @@ def _scenario_paths(scenario: Scenario):
         yield scenario.reference, "checkpoint"
     if getattr(scenario.controller, "residual", ""):
         yield scenario.controller, "residual"
+    if scenario.motion.skills:
+        yield scenario.motion, "skills"
 
 
 def resolved(scenario: Scenario, base: Path | None) -> Scenario:

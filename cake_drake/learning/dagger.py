@@ -143,7 +143,7 @@ def dagger(
     from cake_drake.learning import dataset
     from cake_drake.learning import train as training
     from cake_drake.learning.recording import _keep, _write_whole
-    from cake_drake.pipeline import CHECKPOINT_POLICY
+    from cake_drake.scenario import CHECKPOINT_POLICY
 
     root, out = Path(root), Path(out)
     check_rounds(rounds, per_round, beta, round_steps)

@@ -49,7 +49,6 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from cake_drake.errors import CakeDrakeError
-from cake_drake.execution import STACK_TOL
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.solve import refine_action, release_action, solve_action
 from cake_drake.geometric.trajectory import (
@@ -65,6 +64,13 @@ from cake_drake.geometric.waypoints import (
     WorldView,
     gripper_down,
 )
+from cake_drake.policy.observations import (
+    SKILL_SIZE,
+    SkillContext,
+    ground_row,
+    skill_context,
+    skill_vector,
+)
 from cake_drake.policy.spaces import EE_STEP, GRIPPER_MAX
 from cake_drake.symbolic import (
     DEFAULT_PLANNER,
@@ -77,7 +83,7 @@ from cake_drake.symbolic import (
 from cake_drake.symbolic.grounding import apply_action
 from cake_drake.symbolic.kernels import kernels, latest_kernel
 from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
-from cake_drake.world.facts import lost_cubes, read_facts, stack_offsets
+from cake_drake.world.facts import STACK_TOL, lost_cubes, read_facts, stack_offsets
 from cake_drake.world.scene import CUBE_SIZE
 
 #: s a world that does not read as facts (a cube falling, rolling or tilted) is waited for.
@@ -162,6 +168,8 @@ class _Action:
     X_place: RigidTransform | None = None
     tau: float = 0.0  # the motion's time the hand was last sent to
     waited: int = 0  # steps the clock has waited for the hand
+    #: What a learned skill would be told of this action (observation.skill's targets).
+    skill: SkillContext | None = None
 
     def expects(self, tau: float, grace: float) -> tuple[int, ...]:
         """Kernel indices the world may be at: this action's before its gripper change,
@@ -247,6 +255,7 @@ class ClosedLoopExpert:
         self.stranded: set[str] = set()  # cubes taken as on the table (see act)
         self._pending_pickups: tuple[str, ...] = ()
         self._stalls = 0  # motions dropped in a row because the hand did not follow
+        self._measured: Measured | None = None
 
     def _set_plan(self, actions: tuple[GroundAction, ...]) -> None:
         self.plan = actions
@@ -265,7 +274,7 @@ class ClosedLoopExpert:
     def _act(self, observation: Mapping):
         if self.reason is not None:
             return None, True
-        m = measured(observation, self.cubes)
+        m = self._measured = measured(observation, self.cubes)
         step, self.steps = (
             self.steps,
             self.steps + (self.execute if self.space == "joint_chunk" else 1),
@@ -332,6 +341,15 @@ class ClosedLoopExpert:
             except CakeDrakeError as e:
                 return self._end(f"no motion for {self.plan[i]}: {e}")
         return self._answer(a, m, advance=True)
+
+    def skill_observation(self) -> tuple[np.ndarray, np.ndarray]:
+        """What a learned skill would have read at the last step (``observation.skill``)
+        and which ground action was under way (``ground_action``): zeros and -1 while no
+        action is (waiting, or the episode over). Read by the recording, per frame."""
+        a, m = self.current, self._measured
+        if a is None or a.skill is None or m is None:
+            return np.zeros(SKILL_SIZE, np.float32), ground_row(None, self.cubes, -1)
+        return skill_vector(a.skill, m.cubes, m.X_WG), ground_row(a.skill, self.cubes, a.pos)
 
     # --- deciding -----------------------------------------------------------------------
 
@@ -508,7 +526,8 @@ class ClosedLoopExpert:
             meaning, i, self._world(m), self.ik, traj, self.timing, self.params, refine=True
         )
         pending = motion.pending_after if meaning.name in PLACE_ACTIONS else None
-        return _Action(i, action, meaning, traj, motion.params, pending)
+        skill = skill_context(meaning, m.cubes, self.slots, self.params)
+        return _Action(i, action, meaning, traj, motion.params, pending, skill=skill)
 
     def _extend(self, a: _Action, m: Measured) -> None:
         """Above the target: the move down, planned from the poses measured now; at the

@@ -45,6 +45,7 @@ from cake_drake.plugins import DURING, PluginError, guarded
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import Observation, environment_state, goal_table, pose7
 from cake_drake.systems.waypoint_ik import REFERENCE_PORTS, WorldIndices
+from cake_drake.world.facts import GoalReading, read_goal
 
 #: Wall-clock budget (s) of one call to a policy's ``act``.
 ACT_BUDGET_S = 30.0
@@ -74,35 +75,10 @@ class PolicyTask:
                 self.goal_table = goal_table(self.cubes, self.goal_facts)
 
 
-@dataclass(frozen=True)
-class GoalProgress:
-    """The goal as the measured world shows it: the goal facts that hold, whether all of
-    them do with every stacked cube within tolerance, whether a cube has left the table."""
-
-    true: frozenset
-    reached: bool
-    lost: bool
-
-    def reward(self, goal: frozenset) -> float:
-        return len(self.true) / len(goal) if goal else 1.0
-
-
-def goal_progress(poses, finger: float, goal: frozenset, X_WG=None) -> GoalProgress:
-    """:class:`GoalProgress` from the cubes' poses, a finger's opening and the grasp frame
-    (the verdict's reading: facts as the monitor reads them, a cube still in the hand on
-    nothing, stacks within ``STACK_TOL``)."""
-    from cake_drake.execution import STACK_TOL
-    from cake_drake.world.facts import read_facts, stack_offsets
-
-    reading = read_facts(poses, X_WG=X_WG, finger_opening=finger)
-    true = goal & reading.facts
-    stacked = [f for f in goal if f[0] == "on" and f in true]
-    loose = False
-    if stacked:
-        offsets = stack_offsets(poses, reading.facts)
-        loose = any(offsets.get(f[1], 0.0) > STACK_TOL for f in stacked)
-    lost = any(X.translation()[2] < -0.05 for X in poses.values())
-    return GoalProgress(frozenset(true), bool(true == goal and not loose), lost)
+def goal_progress(poses, finger: float, goal: frozenset, X_WG=None) -> GoalReading:
+    """The goal as the measured world shows it (:func:`cake_drake.world.facts.read_goal`,
+    the verdict's own reading)."""
+    return read_goal(poses, goal, X_WG, finger)
 
 
 class PolicySource(LeafSystem):
@@ -216,7 +192,7 @@ class PolicySource(LeafSystem):
         self._observed = (key, obs)
         return obs
 
-    def progress(self, obs: Observation) -> GoalProgress:
+    def progress(self, obs: Observation) -> GoalReading:
         """How much of the goal the world in ``obs`` shows (read once per observation)."""
         found = getattr(obs, "progress", None)
         if found is None:
@@ -299,8 +275,7 @@ def policy_of(ref) -> tuple[str, dict]:
     and ``options``, or, for a ``checkpoint``, the learned layer's adapter (through the
     plug-in door) with the folder and device."""
     if ref.checkpoint:
-        from cake_drake.pipeline import CHECKPOINT_POLICY
-        from cake_drake.scenario import resolve_path
+        from cake_drake.scenario import CHECKPOINT_POLICY, resolve_path
 
         return CHECKPOINT_POLICY, {"path": str(resolve_path(ref.checkpoint)), "device": ref.device}
     return ref.factory, dict(ref.options)

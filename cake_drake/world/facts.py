@@ -17,6 +17,7 @@ from pydrake.math import RigidTransform
 from cake_drake.world.scene import CUBE_SIZE
 
 HEIGHT_TOL = 0.006  # m: how far a resting cube's centre may be from its nominal height
+STACK_TOL = 0.005  # m: a goal's stacked cube must stand within this of the one below (xy)
 TILT_TOL = 0.1  # rad: a cube tilted more than this does not rest flat
 
 
@@ -110,6 +111,48 @@ def stack_offsets(poses: Mapping[str, RigidTransform], facts) -> dict[str, float
         for f in facts
         if f[0] == "on"
     }
+
+
+@dataclass(frozen=True)
+class GoalReading:
+    """The goal as the measured world shows it, read one way for everyone (the run's
+    verdict, the policy slot, the Gym env, the expert): the goal facts that hold and the
+    ones missing (a cube still in the hand stands on nothing), each goal-stacked cube
+    farther than :data:`STACK_TOL` off the one below, and whether a cube left the table."""
+
+    true: frozenset
+    missing: frozenset
+    loose: dict  # cube -> its xy offset (m) from the cube below, where over STACK_TOL
+    lost: bool
+
+    @property
+    def reached(self) -> bool:
+        return not self.missing and not self.loose
+
+    def reward(self, goal: frozenset) -> float:
+        return len(self.true) / len(goal) if goal else 1.0
+
+
+def read_goal(
+    poses: Mapping[str, RigidTransform],
+    goal: frozenset,
+    X_WG: RigidTransform | None = None,
+    finger_opening: float | None = None,
+    reading: Reading | None = None,
+) -> GoalReading:
+    """:class:`GoalReading` of ``goal`` (canonical facts) from the cubes' poses, the grasp
+    frame and a finger's opening (or a :func:`read_facts` ``reading`` of them)."""
+    if reading is None:
+        reading = read_facts(poses, X_WG=X_WG, finger_opening=finger_opening)
+    true = frozenset(goal & reading.facts)
+    offsets = stack_offsets(poses, reading.facts)
+    loose = {
+        f[1]: offsets[f[1]]
+        for f in sorted(true)
+        if f[0] == "on" and offsets.get(f[1], 0.0) > STACK_TOL
+    }
+    lost = any(X.translation()[2] < -0.05 for X in poses.values())
+    return GoalReading(true, frozenset(goal - true), loose, lost)
 
 
 #: m from the arm's base beyond which a cube is out of reach (no plan can use it).
