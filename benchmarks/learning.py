@@ -25,6 +25,16 @@ reach DAgger's expert-labelled frames (from a pool of ``--pool`` recorded episod
 Prints each row's frames and its success on the held-out seeds with the interval.
 
     python benchmarks/learning.py --compare --tasks tower5 blocks3 --policies act
+
+``--skills N``: learned skills under the planner. ``record`` N demonstrations of the
+``skills`` task (generated five-cube problems), ``train`` its recipe (``--inputs skill``),
+then ``evaluate`` the skills in place of each task's demonstrator (the planner's plan, the
+execution monitor, the skills as the geometric layer), with the classical geometric
+layer on the same episodes beside each row; ``--sizes`` adds generated problems of those
+sizes, which no demonstration had. Each row says how often the monitor's repeats and
+replans rescued an episode.
+
+    python benchmarks/learning.py --skills 400 --tasks tower5 blocks3 --sizes 6 8
 """
 
 from __future__ import annotations
@@ -169,6 +179,51 @@ def compare(task: str, policy: str, args) -> None:
         )
 
 
+def skills(args) -> None:
+    """Rows of learned skills under the planner, and the classical layer beside each."""
+    from dataclasses import replace
+
+    from cake_drake.learning.evaluation import evaluate as evaluate_here
+    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.scenario import SKILL_POLICY, load_scenario
+
+    for demos in args.skills:
+        run, figures = trained("skills", "mlp", demos, args.work)
+        print(f"skills: mlp on observation.skill, {demos} demos, trained "
+              f"{figures['train_s'] / 60:.1f} min ({figures['steps'] / figures['train_s']:.1f} "
+              "steps/s)")  # fmt: skip
+        rows = [(task, None) for task in args.tasks] + [("blocks3", n) for n in args.sizes]
+        for task, size in rows:
+            name = f"{task}" if size is None else f"generated {size}"
+            print(name)
+            tag = task if size is None else f"generated{size}"
+            for label, path in (("skills", str(run)), ("classical", "")):
+                out = args.work / f"skills{demos}_{tag}_{label}" / "summary.json"
+                if not out.is_file():
+                    spec = replace(
+                        spec_from_scenario(load_scenario(LEARNING, task)),
+                        cameras=(),
+                        policy=SKILL_POLICY,
+                        options={"path": path, "device": "cpu"},
+                    )
+                    if size is not None:
+                        spec = replace(spec, blocks=(size, size), problem=None)
+                    seeds = [args.eval_seed + k for k in range(args.episodes)]
+                    _, summary = evaluate_here(spec, seeds, len(os.sched_getaffinity(0)))
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                    out.write_text(json.dumps(summary, indent=2))
+                s = json.loads(out.read_text())
+                m = s["monitor"]
+                print(
+                    f"{row(label + ' (under the planner)', s)}  rescued "
+                    f"{m['rescued']}/{m['episodes_with_repeats_or_replans']}",
+                    flush=True,
+                )
+                failures = {k: v for k, v in s["reasons"].items() if k != "goal reached"}
+                for reason, count in sorted(failures.items(), key=lambda kv: -kv[1])[:3]:
+                    print(f"      {count} x {reason[:110]}")
+
+
 def row(name: str, s: dict, train: dict | None = None) -> str:
     lo, hi = wilson(s["success"], s["episodes"])
     per_min = 60.0 / s["mean_wall_s"]  # episodes a minute on one worker (one core)
@@ -199,10 +254,22 @@ def main() -> None:
     p.add_argument("--noise", type=float, default=0.005, help="DART's noise (rad a joint)")
     p.add_argument("--pool", type=int, default=300, help="episodes recorded for BC and DART")
     p.add_argument("--steps", type=int, help="training steps (default: the task's recipe)")
+    p.add_argument(
+        "--skills",
+        type=int,
+        nargs="*",
+        default=[],
+        metavar="DEMOS",
+        help="learned skills under the planner from DEMOS demonstrations",
+    )
+    p.add_argument("--sizes", type=int, nargs="*", default=[], help="generated sizes (--skills)")
     args = p.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     print(machine())
     print(f"held-out seeds {args.eval_seed}..{args.eval_seed + args.episodes - 1}")
+    if args.skills:
+        skills(args)
+        return
     if args.compare:
         print(f"  {'method':<14} {'labelled':>13}  {'success':>7} {'rate':>5}  "
               f"{'95 % interval':<13}")  # fmt: skip

@@ -109,7 +109,7 @@ def main() -> None:
             built += result.success
             hits += len(result.execution.warnings)
             disagreements += len(result.execution.monitoring.get("events", []))
-            planning = result.cake.reference.waypoint_ik.planning
+            planning = result.cake.reference.geometric.planning
             for _, _, q_ms, ratio in planning.queries if planning else ():
                 ms.append(q_ms)
                 if ratio is not None:

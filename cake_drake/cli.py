@@ -270,6 +270,10 @@ def main_run(argv: list[str] | None = None) -> int:
     args = run_parser().parse_args(argv)
     scenario = scenario_from_args(args)
     result = run(scenario, quiet=args.quiet, started=STARTED)
+    if not args.quiet:
+        from cake_drake.outputs.report import layers, layers_line
+
+        print(layers_line(layers(scenario, result.plan)), file=sys.stderr)
     e = result.execution
     rate = f"{e.sim_s:.1f} s simulated in {e.wall_s:.2f} s (RTF {e.rtf:.1f})"
     events = e.monitoring.get("events", [])
@@ -968,9 +972,8 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     from cake_drake.learning.evaluation import evaluate
     from cake_drake.learning.recording import spec_from_scenario
     from cake_drake.outputs.files import OutputDir
-    from cake_drake.pipeline import CHECKPOINT_POLICY
     from cake_drake.plugins import is_plugin
-    from cake_drake.scenario import load_scenario
+    from cake_drake.scenario import CHECKPOINT_POLICY, SKILL_POLICY, load_scenario
 
     args = evaluate_parser().parse_args(argv)
     workers = _workers(args.workers)
@@ -979,7 +982,14 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     scenario = load_scenario(args.suite, args.name)
     checkpoint = Path(args.policy).is_dir() or not is_plugin(args.policy)
     spec = replace(spec_from_scenario(scenario, args.policy), cameras=())
-    if checkpoint:  # a trained policy: the learned layer's adapter runs it
+    skills = checkpoint and _is_skill(Path(args.policy))
+    if skills:  # learned skills: the demonstrator's place under the planner
+        from cake_drake.learning.skills import check_folder
+
+        check_folder(Path(args.policy), args.device)
+        options = {"path": str(Path(args.policy).resolve()), "device": args.device}
+        spec = replace(spec, policy=SKILL_POLICY, options=options)
+    elif checkpoint:  # a trained policy: the learned layer's adapter runs it
         from cake_drake.learning.checkpoint import check_folder
 
         check_folder(Path(args.policy), spec.control_mode, args.device)
@@ -1006,6 +1016,7 @@ def main_evaluate(argv: list[str] | None = None) -> int:
         from cake_drake.sweeps.table import write_table
 
         keys = ["seed", "blocks", "success", "steps", "wall_s", "reason", "task"]
+        keys += ["repeats", "replans"] if skills else []
         out.path("results.parquet"), out.path("results.csv")  # declared, written below
         write_table(sorted(rows, key=lambda r: r["seed"]), out.staging, keys, exact=True)
         out.write_json("summary.json", summary)
@@ -1018,6 +1029,13 @@ def main_evaluate(argv: list[str] | None = None) -> int:
         f"{summary['mean_steps']:.0f} steps; outputs in {args.out}/"
     )
     return EXIT_OK
+
+
+def _is_skill(path: Path) -> bool:
+    """Whether the checkpoint at ``path`` is a learned skill's (its config says so)."""
+    from cake_drake.learning.checkpoint import _config, is_skill, model_folder
+
+    return is_skill(_config(model_folder(path)))
 
 
 def _checkpoint_inputs(path: Path) -> str:

@@ -40,11 +40,12 @@ from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.planners import make_planner
 from cake_drake.geometric.solve import Planning, TimedSolver
 from cake_drake.plugins import PluginError, is_plugin
-from cake_drake.scenario import Policy, Recorded, Scenario, resolve_path
+from cake_drake.scenario import Policy, Recorded, Scenario, portable_path, resolve_path
 from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
 from cake_drake.systems import SourceContext, make_action_source
 from cake_drake.systems.policy_source import PolicySource
+from cake_drake.systems.skills import LearnedSkills
 from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
 from cake_drake.world.cameras import add_cameras
 from cake_drake.world.faults import Knock, Pusher, Slip, SlipFingers
@@ -60,7 +61,8 @@ class ReferenceSource:
 
     system: System  # has the named ports of cake_drake.systems.waypoint_ik.REFERENCE_PORTS
     actions: tuple[str, ...]  # the actions it executes, by name
-    waypoint_ik: WaypointIk | None = None  # planned: the geometric layer
+    #: planned: the geometric layer (WaypointIk, or LearnedSkills: the same ports)
+    geometric: WaypointIk | LearnedSkills | None = None
     action_source: System | None = None  # planned: where the actions come from
     replay: ReferenceTrajectory | None = None  # recorded: what is replayed
     policy: PolicySource | None = None  # a policy: the learned layer's slot
@@ -70,12 +72,24 @@ class ReferenceSource:
 
     def monitoring(self, root_context) -> dict:
         """What an execution monitor recorded: ``events``, ``replans``, ``checks`` (empty
-        for an open-loop source)."""
+        for an open-loop source); and with learned skills, ``skills``: how their actions
+        ended (effects held, or budget ran out and handed back) and their steps."""
+        found = {}
         source = self.action_source
-        if source is None or not hasattr(source, "state"):
-            return {}
-        s = source.state(source.GetMyContextFromRoot(root_context))
-        return {"events": list(s.events), "replans": s.replans, "checks": s.checks}
+        if source is not None and hasattr(source, "state"):
+            s = source.state(source.GetMyContextFromRoot(root_context))
+            found = {"events": list(s.events), "replans": s.replans, "checks": s.checks}
+        if isinstance(self.geometric, LearnedSkills):
+            prog = self.geometric.progress(self.geometric.GetMyContextFromRoot(root_context))
+            found["skills"] = {
+                "checkpoint": self.geometric.label,
+                "actions_ended": prog.done,
+                "effects_held": prog.succeeded,
+                "budget_ran_out": prog.timed_out,
+                "steps": prog.total_steps,
+                "budget_steps": self.geometric.budget,
+            }
+        return found
 
     def executed(self, root_context) -> tuple[str, ...]:
         """The actions executed, by name, in order (an action source may have chosen them)."""
@@ -84,14 +98,24 @@ class ReferenceSource:
             return tuple(str(a) for a in source.executed(source.GetMyContextFromRoot(root_context)))
         return self.actions
 
+    def note(self, root_context) -> str:
+        """What the geometric layer is doing, for the progress line: a learned skill's
+        action under way and its steps in it (empty otherwise)."""
+        if not isinstance(self.geometric, LearnedSkills):
+            return ""
+        prog = self.geometric.progress(self.geometric.GetMyContextFromRoot(root_context))
+        if prog.working < 0:
+            return ""
+        return f"{prog.action}, skill step {prog.steps}/{self.geometric.budget}"
+
     def status(self, root_context) -> tuple[int, bool, str | None, tuple[str, ...]]:
         """(actions done, finished, the error that stopped execution or None, collision
         warnings). Planned: finished when the action source has no next action and the
         arm is idle; recorded: when every recorded action has run."""
         if self.policy is not None:
             return self.policy.steps, self.policy.finished(), None, ()
-        if self.waypoint_ik is not None:
-            prog = self.waypoint_ik.progress(self.waypoint_ik.GetMyContextFromRoot(root_context))
+        if self.geometric is not None:
+            prog = self.geometric.progress(self.geometric.GetMyContextFromRoot(root_context))
             source_context = self.action_source.GetMyContextFromRoot(root_context)
             command = self.action_source.GetOutputPort("action").Eval(source_context)
             # (a user's source may give anything: WaypointIk reports that as the error)
@@ -150,6 +174,51 @@ def _add_reference(
         system = builder.AddNamedSystem("reference", replay.make_source())
         return ReferenceSource(system, replay.executed_actions(), replay=replay), None
     plant = scene.plant
+    indices = _world_indices(scene, slots)
+    context = SourceContext(
+        tuple(actions), problem, indices, planner, scenario.world.time_step, ref.max_replans,
+        ref.re_place,
+    )  # fmt: skip
+    source = builder.AddNamedSystem("action_source", make_action_source(ref.action_source, context))
+    roles = blocksworld_roles(problem.domain)
+    meaning = lambda action: roles.classify(action).canonical()  # noqa: E731
+    if scenario.motion.skills:
+        geometric, solver = _add_skills(builder, scenario, indices, q_start, meaning), None
+    else:
+        geometric, solver = _add_waypoint_ik(
+            builder, scenario, scene, indices, q_start, meaning, source.HasInputPort("infeasible")
+        )
+    builder.Connect(plant.get_body_poses_output_port(), geometric.GetInputPort("body_poses"))
+    wires = [
+        (source.GetOutputPort("action"), geometric.GetInputPort("action")),
+        (geometric.GetOutputPort("actions_done"), source.GetInputPort("actions_done")),
+    ]
+    if geometric.HasInputPort("arm_state"):
+        wires.append((plant.get_state_output_port(scene.arm), geometric.GetInputPort("arm_state")))
+        wires.append(
+            (plant.get_state_output_port(scene.hand), geometric.GetInputPort("hand_state"))
+        )
+    if source.HasInputPort("body_poses"):
+        wires.append((plant.get_body_poses_output_port(), source.GetInputPort("body_poses")))
+    if source.HasInputPort("infeasible"):
+        wires.append((geometric.GetOutputPort("infeasible"), source.GetInputPort("infeasible")))
+    if source.HasInputPort("hand_state"):
+        wires.append((plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state")))
+    for out_port, in_port in wires:
+        try:
+            builder.Connect(out_port, in_port)
+        except RuntimeError as e:  # a user's source whose ports are not the protocol's
+            first = (str(e).strip().splitlines() or [""])[0]
+            raise PluginError(
+                f"action source {ref.action_source!r}: port {in_port.get_name()!r} or "
+                f"{out_port.get_name()!r} does not fit the protocol ({first})"
+            ) from None
+    names = tuple(str(a) for a in actions)
+    return ReferenceSource(geometric, names, geometric, source), solver
+
+
+def _add_waypoint_ik(builder, scenario, scene, indices, q_start, meaning, feedback):
+    """The classical geometric layer: waypoints, IK, timed moves (and its IK solver)."""
     kinematics = Kinematics(scene.control_plant)
     spec = scenario.motion.ik
     solver = TimedSolver(
@@ -169,54 +238,44 @@ def _add_reference(
             scenario.seed,
             (kinematics.lower, kinematics.upper),
         )
-    indices = _world_indices(scene, slots)
-    context = SourceContext(
-        tuple(actions), problem, indices, planner, scenario.world.time_step, ref.max_replans
-    )
-    source = builder.AddNamedSystem("action_source", make_action_source(ref.action_source, context))
-    roles = blocksworld_roles(problem.domain)
     settings = MotionSettings(
         motion.timing,
         motion.waypoints,
         checker,
         motion.avoid_collisions,
-        meaning=lambda action: roles.classify(action).canonical(),
+        meaning=meaning,
         planning=planning,
-        feedback=source.HasInputPort("infeasible"),
+        feedback=feedback,
     )
-    waypoint_ik = builder.AddNamedSystem(
-        "waypoint_ik",
-        WaypointIk(
-            solver,
-            indices,
-            q_start,
-            kinematics.limits,
-            scenario.world.time_step,
-            settings,
-        ),
+    waypoint_ik = WaypointIk(
+        solver, indices, q_start, kinematics.limits, scenario.world.time_step, settings
     )
-    builder.Connect(plant.get_body_poses_output_port(), waypoint_ik.GetInputPort("body_poses"))
-    wires = [
-        (source.GetOutputPort("action"), waypoint_ik.GetInputPort("action")),
-        (waypoint_ik.GetOutputPort("actions_done"), source.GetInputPort("actions_done")),
-    ]
-    if source.HasInputPort("body_poses"):
-        wires.append((plant.get_body_poses_output_port(), source.GetInputPort("body_poses")))
-    if source.HasInputPort("infeasible"):
-        wires.append((waypoint_ik.GetOutputPort("infeasible"), source.GetInputPort("infeasible")))
-    if source.HasInputPort("hand_state"):
-        wires.append((plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state")))
-    for out_port, in_port in wires:
-        try:
-            builder.Connect(out_port, in_port)
-        except RuntimeError as e:  # a user's source whose ports are not the protocol's
-            first = (str(e).strip().splitlines() or [""])[0]
-            raise PluginError(
-                f"action source {ref.action_source!r}: port {in_port.get_name()!r} or "
-                f"{out_port.get_name()!r} does not fit the protocol ({first})"
-            ) from None
-    names = tuple(str(a) for a in actions)
-    return ReferenceSource(waypoint_ik, names, waypoint_ik, source), solver
+    return builder.AddNamedSystem("waypoint_ik", waypoint_ik), solver
+
+
+def _add_skills(builder, scenario, indices, q_start, meaning):
+    """The learned geometric layer: a skill checkpoint executes each ground action
+    (its adapter through the plug-in door: nothing here imports the learning code)."""
+    from cake_drake.plugins import guarded, load_attribute
+    from cake_drake.scenario import SKILL_POLICY
+    from cake_drake.systems.skills import DEFAULT_BUDGET, LearnedSkills
+
+    motion = scenario.motion
+    label = portable_path(motion.skills)
+    path = str(resolve_path(motion.skills))
+    skill = guarded(f"skill {label!r}", load_attribute(SKILL_POLICY, "skill"), path,
+                    motion.skill_device)  # fmt: skip
+    system = LearnedSkills(
+        skill,
+        label,
+        indices,
+        q_start,
+        motion.skill_rate_hz,
+        motion.skill_max_steps or DEFAULT_BUDGET,
+        meaning,
+        motion.waypoints,
+    )
+    return builder.AddNamedSystem("skills", system)
 
 
 def _world_indices(scene: Scene, slots) -> WorldIndices:
@@ -378,6 +437,6 @@ def build_diagram(
         add_visualization(builder, scene.scene_graph, meshcat)
     diagram = builder.Build()
     diagram.set_name("cake_drake")
-    if reference.waypoint_ik is not None and reference.waypoint_ik.checker is not None:
-        reference.waypoint_ik.checker.bind(diagram)
+    if reference.geometric is not None and reference.geometric.checker is not None:
+        reference.geometric.checker.bind(diagram)
     return CakeDiagram(diagram, scene, scenario, reference, controller, loggers, solver, cameras)

@@ -97,3 +97,28 @@ def test_bad_fault_specs_are_refused_before_simulating(tmp_path, spec, words):
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_re_place_sets_a_loose_goal_stack_down_again_within_the_replan_budget():
+    """Half-kilogram cubes, which the control plant's model lacks: computed torque sets c
+    down about 13 mm off a, yet (on c a) reads true. With re_place the monitor sets it
+    down again, each time a replan, until the budget is spent; without it, nothing."""
+    from cake_drake.scenario import Generate
+
+    def heavy(re_place: bool) -> Scenario:
+        s = Scenario()
+        s.task.generate = Generate(blocks=3, seed=11)
+        s.world.cube_mass_kg = 0.5
+        s.reference.re_place, s.reference.max_replans = re_place, 2
+        return s
+
+    mended = run(heavy(True), write=False)
+    events = mended.execution.monitoring["events"]
+    assert [e["kind"] for e in events] == ["re-place", "re-place"]
+    assert all(e["why"].startswith("c stands") and e["why"].endswith("mm off a") for e in events)
+    assert events[0]["new_plan"] == ["(unstack c a)", "(stack c a)"]
+    assert mended.execution.monitoring["replans"] == 2
+    assert mended.execution.actions[-4:] == ("(unstack c a)", "(stack c a)") * 2
+    plain = run(heavy(False), write=False)
+    assert not plain.execution.monitoring["events"] and not plain.success

@@ -249,6 +249,22 @@ def test_the_progress_bar_keeps_its_width_when_a_recovery_runs_past_the_plan(cap
     assert "action 14 of 10+ (recovering)" in lines[0] and "action 10/10 done" in lines[1]
 
 
+def test_the_progress_line_counts_a_policys_steps_and_a_skills_action(capsys):
+    from cake_drake.execution import ProgressBar
+
+    policy = ProgressBar(400, lambda k: "", unit="step")
+    policy.update(3.2, 1.0, 32)
+    policy.update(4.0, 3.0, 40, final=True)
+    skills = ProgressBar(10, lambda k: f"(plan action {k})")
+    skills.update(20.0, 1.0, 3, note="(unstack b c), skill step 12/150")
+    skills.update(40.0, 3.0, 12, note="(stack a b), skill step 5/150")
+    lines = capsys.readouterr().err.splitlines()
+    assert "policy step 32/400" in lines[0] and "recovering" not in lines[0]
+    assert lines[1].endswith("policy step 40/400 done")
+    assert lines[2].endswith("action 4/10 (unstack b c), skill step 12/150")
+    assert lines[3].endswith("action 13 of 10+ (stack a b), skill step 5/150")
+
+
 def test_the_joint_plot_marks_each_fault_when_it_struck():
     from types import SimpleNamespace
 

@@ -103,7 +103,7 @@ def _nearest_turn(yaw: float, preferred: float) -> float:
     return yaw + k * math.pi / 2
 
 
-def _transit_height(
+def transit_height(
     poses: Mapping[str, RigidTransform], held: str | None, params: WaypointParams
 ) -> float:
     """Grasp-frame height that carries a (held) cube clear of every tower."""
@@ -144,7 +144,7 @@ def waypoints_for(
         preferred = math.atan2(p[1], p[0]) + params.yaw_turns * math.pi / 2
         yaw = _nearest_turn(face_yaw(X_WB), preferred)
         R = gripper_down(yaw)
-        z_transit = _transit_height(poses, held=None, params=params)
+        z_transit = transit_height(poses, held=None, params=params)
         above = max(z_transit, p[2] + params.approach)
         return [
             Waypoint("pre-grasp", RigidTransform(R, [p[0], p[1], above]), "open"),
@@ -178,7 +178,7 @@ def waypoints_for(
         # Keep the gripper pointing straight down even if the cube tilted in the hand.
         R = gripper_down(_yaw(X_place))
         X_place = RigidTransform(R, X_place.translation())
-        z_transit = max(_transit_height(poses, block, params), X_place.translation()[2])
+        z_transit = max(transit_height(poses, block, params), X_place.translation()[2])
         above = X_place.translation().copy()
         above[2] = z_transit
         # Up and clear of the tower just built - the transit height counting the cube

@@ -15,7 +15,10 @@ memory:
   it;
 - a camera is decoded (PyAV, every frame once, kept as uint8) only when the policy reads
   it, and handed out as LeRobot does: float32 in [0, 1], channels first, through the
-  dataset's image transforms.
+  dataset's image transforms;
+- for a learned skill (a policy that reads ``observation.skill``) the episodes are cut
+  into per-action segments (where ``ground_action`` changes): its history and chunks stop
+  at its action's bounds, padded as at an episode's.
 
 Everything else - the metadata, the sampler's episode bounds, the policy, processors,
 optimiser, scheduler and checkpoints - stays LeRobot's: :func:`fast_batches` swaps the
@@ -33,6 +36,22 @@ import torch
 
 #: lerobot's own per-frame columns, always handed out.
 INDEX_KEYS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
+#: A learned skill's input, and the column that says which ground action a frame is in.
+SKILL, GROUND = "observation.skill", "ground_action"
+
+
+def _segments(index: np.ndarray, episode: np.ndarray, ground: np.ndarray):
+    """Each row's segment bounds (absolute frame indices, end exclusive): the run of frames
+    of one episode under one ground action. A learned skill's history and action chunk
+    stop where its action does, padded there as at an episode's end."""
+    ground = np.asarray(ground).reshape(len(index), -1)
+    new = np.ones(len(index), bool)
+    new[1:] = (episode[1:] != episode[:-1]) | np.any(ground[1:] != ground[:-1], axis=1)
+    new[1:] |= index[1:] != index[:-1] + 1
+    first = np.flatnonzero(new)
+    lengths = np.diff(np.r_[first, len(index)])
+    start = np.repeat(index[first], lengths)
+    return start, start + np.repeat(lengths, lengths)
 
 
 def decode_all(path: Path) -> np.ndarray:
@@ -79,6 +98,8 @@ class ColumnDataset(torch.utils.data.Dataset):
         ends = np.asarray(episodes["dataset_to_index"], np.int64)
         episode = self.columns["episode_index"].astype(np.int64)
         self._start, self._end = starts[episode], ends[episode]
+        if wanted is not None and SKILL in wanted and GROUND in self.columns:
+            self._start, self._end = _segments(index, episode, self.columns[GROUND])
         deltas = _reader(base).delta_indices or {}
         self._deltas = {k: np.asarray(v, np.int64) for k, v in deltas.items()}
         self._tasks = [str(name) for name in meta.tasks.index]

@@ -51,6 +51,12 @@ def _config(folder: Path) -> dict:
         raise InputError(f"{folder / 'config.json'}: unreadable ({e})") from None
 
 
+def is_skill(config: dict) -> bool:
+    """Whether a checkpoint's config is a learned skill's (it reads ``observation.skill``:
+    the ground action it executes) rather than a whole-task policy's."""
+    return "observation.skill" in (config.get("input_features") or {})
+
+
 def action_size(folder: Path) -> int:
     """The size of the action the checkpoint in ``folder`` predicts."""
     config = _config(folder)
@@ -86,6 +92,11 @@ def check_folder(path: Path, action_space: str, device: str = "auto") -> Path:
 
     require_lerobot()
     folder = model_folder(path)
+    if is_skill(_config(folder)):
+        raise InputError(
+            f"{path}: a learned skill (it reads observation.skill, the ground action it "
+            "executes), not a whole-task policy; run it under the planner with motion.skills"
+        )
     size = action_size(folder)
     want = ACTION_SIZE.get(action_space)
     if want is None:

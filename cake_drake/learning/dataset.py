@@ -7,7 +7,11 @@ the layout of :mod:`cake_drake.policy.observations`),
 ``observation.images.<camera>`` (video, H x W x 3, H.264 through PyAV's own FFmpeg),
 ``action`` (float32, the control mode's: 8 for ``joint_position``, 7 for ``ee_delta``: the
 demonstrator's label, also where noise or a learner changed what ran), ``actor`` (int64:
-who acted, 0 the demonstrator, 1 a learner in DAgger's rollouts), and lerobot's own
+who acted, 0 the demonstrator, 1 a learner in DAgger's rollouts),
+``observation.skill`` (float32, 13) and ``ground_action`` (int64, 4): the demonstrator's
+ground action under way, as a learned skill reads it and by name (the layout of
+:mod:`cake_drake.policy.observations`; a recording is cut into per-action segments where
+``ground_action`` changes), and lerobot's own
 ``timestamp``, ``frame_index``, ``episode_index``, ``index`` and ``task_index``; the task
 is the episode's English instruction. ``lerobot`` is an optional extra
 (``pip install 'cake_drake[lerobot]'``, about 8 GB with torch); without it the commands
@@ -30,7 +34,14 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
-from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, GOAL_COLUMNS, MAX_CUBES
+from cake_drake.policy.observations import (
+    ENVIRONMENT_STATE_SIZE,
+    GOAL_COLUMNS,
+    GROUND_ACTION_SIZE,
+    MAX_CUBES,
+    SKILL_SCHEMAS,
+    SKILL_SIZE,
+)
 
 LEROBOT_PIP = "pip install 'cake_drake[lerobot]'  (lerobot 0.6, with torch: about 6 GB)"
 #: The oldest LeRobot the learning commands are written and tested against.
@@ -45,6 +56,13 @@ ENVIRONMENT_NAMES = [
     for k in range(MAX_CUBES)
     for j in range(GOAL_COLUMNS)
 ]
+SKILL_NAMES = [f"is_{s.replace('-', '_')}" for s in SKILL_SCHEMAS] + [
+    "cube_dx", "cube_dy", "cube_dz", "cube_dyaw",
+    "target_dx", "target_dy", "target_dz", "target_dyaw", "transit_dz",
+]  # fmt: skip
+GROUND_NAMES = ["schema", "cube", "other", "plan_position"]
+#: The ground action under way at a frame (see cake_drake.policy.observations).
+GROUND_ACTION = "ground_action"
 ACTION_NAMES = {
     "joint_position": STATE_NAMES,
     "ee_delta": ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"],
@@ -105,6 +123,8 @@ def features(control_mode: str, cameras) -> dict:
             "names": ACTION_NAMES[control_mode],
         },
         ACTOR: {"dtype": "int64", "shape": (1,), "names": [ACTOR]},
+        "observation.skill": {"dtype": "float32", "shape": (SKILL_SIZE,), "names": SKILL_NAMES},
+        GROUND_ACTION: {"dtype": "int64", "shape": (GROUND_ACTION_SIZE,), "names": GROUND_NAMES},
     }
     for c in cameras:
         table[f"observation.images.{c.name}"] = {
@@ -163,13 +183,18 @@ def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  
     )
     frames = 0
     for ep in episodes:
-        actors = ep.actors if ep.actors is not None else np.zeros(len(ep.actions), np.int64)
+        n = len(ep.actions)
+        actors = ep.actors if ep.actors is not None else np.zeros(n, np.int64)
+        skills = ep.skills if ep.skills is not None else np.zeros((n, SKILL_SIZE), np.float32)
+        grounds = ep.grounds if ep.grounds is not None else np.full((n, GROUND_ACTION_SIZE), -1)
         for k in range(len(ep.actions)):
             frame = {
                 "observation.state": ep.states[k],
                 "observation.environment_state": ep.environment[k],
                 "action": ep.actions[k],
                 ACTOR: np.asarray([actors[k]], np.int64),
+                "observation.skill": np.asarray(skills[k], np.float32),
+                GROUND_ACTION: np.asarray(grounds[k], np.int64),
                 "task": ep.task,
             }
             for name, video in ep.images.items():

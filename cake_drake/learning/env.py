@@ -208,20 +208,37 @@ class StackEnv(gymnasium.Env):
         s.seed = seed
         return s
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        from cake_drake.diagram import build_diagram
-        from cake_drake.pipeline import check, plan_and_layout
+    def _draw(self):
+        """This episode's scenario (problem, placement, seed) and its check, drawn from the
+        env's random stream: a generated goal that already holds is no episode."""
+        from cake_drake.pipeline import check
         from cake_drake.symbolic.roles import blocksworld_view
 
-        super().reset(seed=seed)
         episode_seed = int(self.np_random.integers(0, 2**31 - 1))
-        for _ in range(100):  # a generated goal that already holds is no episode: draw again
+        for _ in range(100):
             scenario = self._scenario(episode_seed)
             checked = check(scenario, write=False)
             view = blocksworld_view(checked.problem)
             if self.problem is not None or not view.goal <= view.init:
                 break
             episode_seed = int(self.np_random.integers(0, 2**31 - 1))
+        return scenario, checked
+
+    def episode_scenario(self, seed: int):
+        """The scenario ``reset(seed=seed)`` runs (its problem, placement and seed), as a
+        run would take it: for running the same episode another way (a run with learned
+        skills under the planner)."""
+        gymnasium.Env.reset(self, seed=seed)
+        return self._draw()[0]
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        from cake_drake.diagram import build_diagram
+        from cake_drake.pipeline import plan_and_layout
+        from cake_drake.symbolic.roles import blocksworld_view
+
+        super().reset(seed=seed)
+        scenario, checked = self._draw()
+        view = blocksworld_view(checked.problem)
         plan, slots, initial = plan_and_layout(checked)
         self._held = HeldAction()
         self._cake = build_diagram(

@@ -1,7 +1,11 @@
 """A policy's success rate, measured: episodes over seeded problems, with intervals.
 
 ``evaluate``: a policy over seeded problems; success with a 95 % Wilson interval, per
-problem size, steps, time and the reasons episodes ended.
+problem size, steps, time and the reasons episodes ended. A learned skill checkpoint is
+evaluated under the planner: each episode is the same problem and placement run with the
+plan, the execution monitor and the skills as the geometric layer
+(:func:`cake_drake.learning.skills.episode`), and the summary says how often the
+monitor's repeats and replans rescued an episode.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ import numpy as np
 
 from cake_drake.learning.parallel import map_ordered
 from cake_drake.learning.rollout import FRAMES, EpisodeSpec, rollout
+from cake_drake.scenario import SKILL_POLICY
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -29,6 +34,10 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
 def _evaluate_one(args) -> dict:
     """One episode's row, no frames (run in a worker)."""
     spec, seed = args
+    if spec.policy == SKILL_POLICY:  # learned skills under the planner: a run per episode
+        from cake_drake.learning.skills import episode
+
+        return episode(spec, seed)
     ep = rollout(spec, seed, record=False)
     return {k: v for k, v in asdict(ep).items() if k not in FRAMES}
 
@@ -58,4 +67,12 @@ def evaluate(
         "mean_wall_s": float(np.mean([r["wall_s"] for r in rows])) if rows else 0.0,
         "reasons": dict(Counter(r["reason"] for r in rows)),
     }
+    if rows and "repeats" in rows[0]:  # under the planner: what the monitor's loop did
+        mended = [r for r in rows if r["repeats"] or r["replans"]]
+        summary["monitor"] = {
+            "episodes_with_repeats_or_replans": len(mended),
+            "rescued": sum(r["success"] for r in mended),
+            "repeats": int(sum(r["repeats"] for r in rows)),
+            "replans": int(sum(r["replans"] for r in rows)),
+        }
     return rows, summary

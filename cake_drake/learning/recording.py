@@ -95,6 +95,7 @@ def _keep(ep: Episode, folder: Path, failed_too: bool = False) -> dict:
         with open(tmp, "wb") as f:
             np.savez(f, states=ep.states, actions=ep.actions, environment=ep.environment,
                      actors=ep.actors, executed=ep.executed, task=ep.task,
+                     skills=ep.skills, grounds=ep.grounds,
                      **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
         os.replace(tmp, folder / f"ep_{ep.seed}.npz")
     _write_whole(folder / f"ep_{ep.seed}.json", json.dumps(row) + "\n")
@@ -235,11 +236,22 @@ def _load(path: Path, row: dict, images: bool = True) -> Episode:
         has = set(z.files)
         actors = z["actors"] if "actors" in has and z["actors"].shape else None
         executed = z["executed"] if "executed" in has and z["executed"].shape else actions
+        skills, grounds = _skill_frames(z, len(actions))
         return Episode(
             row["seed"], row["success"], row["reason"], row["steps"], row["wall_s"],
             str(z["task"]), row["blocks"], z["states"], z["environment"], actions, frames,
             np.zeros(len(actions), np.int64) if actors is None else actors, executed,
+            skills, grounds,
         )  # fmt: skip
+
+
+def _skill_frames(z, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """An episode's ground actions per frame; none for one kept before they were recorded."""
+    from cake_drake.policy.observations import NO_GROUND_ACTION, SKILL_SIZE
+
+    if "skills" in z.files and z["skills"].shape == (n, SKILL_SIZE):
+        return z["skills"], z["grounds"]
+    return np.zeros((n, SKILL_SIZE), np.float32), np.tile(NO_GROUND_ACTION, (n, 1))
 
 
 def _install(real: Path, new: Path, names) -> None:

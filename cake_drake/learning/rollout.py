@@ -131,7 +131,9 @@ class Teacher:
 
 
 #: An episode's frame arrays (the rest of an :class:`Episode` is its row in a table).
-FRAMES = ("states", "environment", "actions", "images", "actors", "executed")
+FRAMES = (
+    "states", "environment", "actions", "images", "actors", "executed", "skills", "grounds",
+)  # fmt: skip
 
 
 @dataclass
@@ -151,6 +153,10 @@ class Episode:
     images: dict[str, np.ndarray] = field(default_factory=dict)  # name -> (T, H, W, 3) uint8
     actors: np.ndarray | None = None  # (T,) int64: EXPERT_ACTED or LEARNER_ACTED
     executed: np.ndarray | None = None  # (T, A) float32: what ran (the label plus noise, ...)
+    #: (T, 13) float32 and (T, 4) int64: the labeller's ground action under way at each
+    #: frame, as a learned skill reads it (observation.skill) and by name (ground_action).
+    skills: np.ndarray | None = None
+    grounds: np.ndarray | None = None
 
 
 def _make_policy(spec: str, options: dict):
@@ -197,6 +203,7 @@ def rollout(
     noise = spec.noise * noise_scale(spec.control_mode) if spec.noise else None
     noise_rng, coin_rng = _stream(seed, NOISE_STREAM), _stream(seed, COIN_STREAM)
     states, environment, actions, actors, executed = [], [], [], [], []
+    skills, grounds = [], []
     images = {c.name: [] for c in spec.cameras}
     reason, steps, ender = "the policy said done", 0, policy
     terminated = truncated = False
@@ -204,8 +211,9 @@ def rollout(
         action, done = _answer(policy, label, obs, spec, kin, counts)
         if done and action is None:
             break
-        labelled, actor = action, EXPERT_ACTED
+        labelled, actor, labeller = action, EXPERT_ACTED, policy
         if teacher is not None:
+            labeller = expert
             labelled, expert_done = _answer(expert, expert_label, obs, spec, kin, counts)
             if expert_done and labelled is None:
                 ender = expert
@@ -225,6 +233,9 @@ def rollout(
             actions.append(labelled)
             actors.append(actor)
             executed.append(action)
+            skill, ground = _skill_observation(labeller)
+            skills.append(skill)
+            grounds.append(ground)
             for name in images:
                 images[name].append(obs["images"][name])
         obs, _, terminated, truncated, info = env.step(action)
@@ -249,7 +260,20 @@ def rollout(
         ep.environment = np.stack(environment)
         ep.images = {k: np.stack(v) for k, v in images.items()}
         ep.actors, ep.executed = np.asarray(actors, np.int64), np.stack(executed)
+        ep.skills, ep.grounds = np.stack(skills), np.stack(grounds)
     return ep
+
+
+def _skill_observation(policy) -> tuple[np.ndarray, np.ndarray]:
+    """The ground action ``policy`` was executing at its last answer, as a skill reads it
+    (the closed-loop expert says; any other policy: none)."""
+    from cake_drake.policy.observations import NO_GROUND_ACTION, SKILL_SIZE
+
+    said = getattr(policy, "skill_observation", None)
+    if said is None:
+        return np.zeros(SKILL_SIZE, np.float32), NO_GROUND_ACTION.copy()
+    skill, ground = said()
+    return np.asarray(skill, np.float32), np.asarray(ground, np.int64)
 
 
 def replay(spec: EpisodeSpec, seed: int, actions: np.ndarray) -> bool:

@@ -16,7 +16,10 @@ fine-tune, with the new dataset's normalisation), as DAgger's rounds do
 
 What a policy reads (``inputs``): ``state`` is ``observation.state`` and
 ``observation.environment_state`` (the cubes' poses and the goal), ``images`` the cameras
-(with ``observation.state``), ``both`` all of them.
+(with ``observation.state``), ``both`` all of them; ``skill`` is ``observation.state`` and
+``observation.skill`` (the ground action under way: a learned skill, trained on the
+recording cut into per-action segments, which the geometric layer runs under the
+planner).
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ from cake_drake.scenario import Training
 #: ``mlp`` is the project's own state policy, registered with LeRobot as ``cake_mlp``
 #: (:mod:`cake_drake.learning.mlp`); the others are LeRobot's.
 POLICIES = ("act", "diffusion", "mlp")
-INPUTS = ("state", "images", "both")
+INPUTS = ("state", "images", "both", "skill")
 #: What the output folder holds (nothing else is written there).
 TRAIN_OUTPUTS = ("checkpoints", "train.json")
 
@@ -66,6 +69,13 @@ def input_keys(features: dict, inputs: str, root: Path) -> list[str]:
     keys = []
     if "observation.state" in features:
         keys.append("observation.state")
+    if inputs == "skill":
+        if "observation.skill" not in features:
+            raise InputError(
+                f"{root}: no observation.skill (the ground action under way), which a learned "
+                "skill needs: record it again with python -m cake_drake.record"
+            )
+        keys.append("observation.skill")
     if inputs in ("state", "both"):
         if "observation.environment_state" not in features:
             raise InputError(
@@ -109,8 +119,15 @@ def check(
         value = getattr(recipe, name)
         if not (isinstance(value, int) and lo <= value <= hi):
             raise InputError(f"--{name.replace('_', '-')} {value!r}: a whole number, {lo} to {hi}")
-    if recipe.policy == "mlp" and recipe.inputs != "state":
-        raise InputError(f"--policy mlp reads the state only, not --inputs {recipe.inputs}")
+    if recipe.policy == "mlp" and recipe.inputs not in ("state", "skill"):
+        raise InputError(
+            f"--policy mlp reads numbers only (--inputs state or skill), "
+            f"not --inputs {recipe.inputs}"
+        )
+    if recipe.inputs == "skill" and recipe.policy != "mlp":
+        raise InputError(
+            f"--inputs skill trains --policy mlp (a learned skill), not {recipe.policy}"
+        )
     if not 1 <= recipe.n_action_steps <= recipe.chunk_size:
         raise InputError(
             f"training.n_action_steps {recipe.n_action_steps}: 1 to chunk_size "

@@ -55,17 +55,36 @@ def layers(scenario, plan) -> dict:
     else:
         symbolic = {"kind": "classical", "what": getattr(plan, "planner", None)}
         if isinstance(reference, Recorded):
-            moves = f"a recorded trajectory ({reference.path})"
+            geometric = {"kind": "classical", "what": f"a recorded trajectory ({reference.path})"}
+        elif motion.skills:
+            geometric = {"kind": "learned", "what": f"skills ({motion.skills})"}
         else:
             moves = f"waypoints, IK ({motion.ik}), {motion.planner} moves"
-        geometric = {"kind": "classical", "what": moves}
+            geometric = {"kind": "classical", "what": moves}
     residual = getattr(scenario.controller, "residual", "")
     if residual:
         dynamic = {"kind": "learned", "what": f"residual on computed torque ({residual})"}
     else:
-        name = getattr(scenario.controller, "factory", "") or type(scenario.controller).__name__
+        c = scenario.controller
+        kind = type(c).__name__
+        name = (
+            {
+                "ComputedTorque": "computed torque, InverseDynamicsController",
+                "JointPd": "joint PD",
+                "Pid": "PID",
+            }.get(kind)
+            or getattr(c, "factory", "")
+            or kind
+        )
         dynamic = {"kind": "classical", "what": name}
     return {"symbolic": symbolic, "geometric": geometric, "dynamic": dynamic}
+
+
+def layers_line(found: dict) -> str:
+    """:func:`layers` in one line: ``layers: symbolic classical (astar-lmcut) · ...``."""
+    return "layers: " + " · ".join(
+        f"{name} {layer['kind']} ({layer['what']})" for name, layer in found.items()
+    )
 
 
 def summary(result) -> dict:
@@ -106,6 +125,8 @@ def summary(result) -> dict:
         "actions_done": execution.actions_done,
         "executed": list(execution.actions),
         "replans": execution.monitoring.get("replans", 0),
+        "repeats": sum(e.get("kind") == "repeat" for e in execution.monitoring.get("events", [])),
+        "skills": execution.monitoring.get("skills"),
         "faults": [{"kind": type(f).__name__, **vars(f)} for f in result.faults],
         "events": execution.monitoring.get("events", []),
         "error": execution.error,
@@ -126,7 +147,7 @@ def summary(result) -> dict:
         if cake.ik and cake.ik.times_ms
         else None,
         "policy": _policy(cake.reference.policy),
-        "motion_planner": _motion_planner(scenario, cake.reference.waypoint_ik),
+        "motion_planner": _motion_planner(scenario, cake.reference.geometric),
         # The GL implementation the cameras were rendered with (a GPU, or llvmpipe).
         "renderer": renderer_in_use() if cake.cameras else None,
     }

@@ -33,11 +33,36 @@ numbers   meaning
 ========= ======================================================================
 
 Images are rendered only when read: a policy that reads no image costs no frame.
+
+A learned skill (the geometric layer learned: one ground action at a time, under the
+planner) reads ``observation.state`` and ``observation.skill``: the action it executes
+and its argument cubes, relative to the hand, so that it does not depend on how many
+cubes the problem has or where in the list a cube is (:func:`skill_vector`). The
+action's targets are fixed when it starts (:func:`skill_context`), as the classical
+layer's waypoints are:
+
+========= ======================================================================
+numbers   ``observation.skill`` (float32, 13)
+========= ======================================================================
+0-3       the action's schema, one-hot: pick-up, unstack, put-down, stack
+4-6       the moved cube's centre minus the grasp frame's origin (m, world axes)
+7         the moved cube's yaw minus the hand's, modulo 90 degrees (rad, +-pi/4)
+8-10      the target minus the grasp frame's origin (m): above the cube at the
+          transit height (pick-up, unstack); where the cube's centre is to rest
+          (put-down: the table slot; stack: on the lower cube's measured top)
+11        the target's yaw minus the hand's, modulo 90 degrees (0 for a pick)
+12        the transit height minus the grasp frame's height (m)
+========= ======================================================================
+
+``ground_action`` (int64, 4) says per frame which ground action it is: the schema's
+index (-1: none under way), the cubes' indices in ``cubes`` (-1: none), and the action's
+place in the plan; a recording is cut into per-action segments where it changes.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.math import RigidTransform
@@ -49,6 +74,14 @@ MAX_CUBES = 12
 #: Columns of a cube's goal row: the 12 cubes, then the table.
 GOAL_COLUMNS = MAX_CUBES + 1
 ENVIRONMENT_STATE_SIZE = MAX_CUBES * 7 + MAX_CUBES * GOAL_COLUMNS
+
+
+#: The ground actions a skill executes, by what they do (the exercise's names).
+SKILL_SCHEMAS = ("pick-up", "unstack", "put-down", "stack")
+SKILL_SIZE = 13
+#: The frame's ground action: schema, moved cube, other cube, the action's place in the plan.
+GROUND_ACTION_SIZE = 4
+NO_GROUND_ACTION = np.full(GROUND_ACTION_SIZE, -1, np.int64)
 
 
 def goal_table(cubes: Sequence[str], goal: Iterable[tuple]) -> np.ndarray:
@@ -117,3 +150,98 @@ def instruction(goal: Iterable[tuple]) -> str:
 
 def goal_facts(goal: Iterable[tuple]) -> tuple[str, ...]:
     return tuple(fact_str(f) for f in sorted(goal))
+
+
+@dataclass(frozen=True)
+class SkillContext:
+    """What a skill is told when its ground action starts (fixed until it ends): the
+    schema, the moved cube, the other cube (or None), the place target (the cube's
+    centre at rest, or None for a pick), its yaw, and the transit height."""
+
+    schema: str  # one of SKILL_SCHEMAS
+    cube: str
+    other: str | None
+    target: np.ndarray | None
+    target_yaw: float
+    z_transit: float
+
+
+def _quarter(angle: float) -> float:
+    """``angle`` modulo 90 degrees, in [-pi/4, pi/4)."""
+    return float((angle + np.pi / 4) % (np.pi / 2) - np.pi / 4)
+
+
+def _yaw(X: RigidTransform) -> float:
+    R = X.rotation().matrix()
+    return float(np.arctan2(R[1, 0], R[0, 0]))
+
+
+def skill_context(action, cubes: Mapping[str, RigidTransform], slots, params=None) -> SkillContext:
+    """The targets of ``action`` (in the exercise's names, see ``SKILL_SCHEMAS``) from the
+    world measured as it starts: the classical layer's own (its free slot, the lower
+    cube's top, its transit height: :mod:`cake_drake.geometric.waypoints`)."""
+    from cake_drake.geometric.waypoints import (
+        WaypointParams,
+        face_yaw,
+        free_slot,
+        transit_height,
+    )
+    from cake_drake.world.scene import CUBE_SIZE
+
+    params = params or WaypointParams()
+    name, args = action.name, tuple(action.args)
+    if name not in SKILL_SCHEMAS:
+        raise ValueError(f"{action}: a skill executes {', '.join(SKILL_SCHEMAS)}")
+    cube = args[0]
+    other = args[1] if len(args) > 1 else None
+    target, target_yaw = None, 0.0
+    if name == "stack":
+        X = cubes[other]
+        target = X.translation() + [0.0, 0.0, CUBE_SIZE]
+        target_yaw = face_yaw(X)
+    elif name == "put-down":
+        x, y = free_slot(cubes, cube, params, slots)
+        target = np.array([x, y, CUBE_SIZE / 2])
+        target_yaw = float(np.arctan2(y, x))
+    held = cube if name in ("put-down", "stack") else None
+    return SkillContext(name, cube, other, target, target_yaw,
+                        transit_height(cubes, held, params))  # fmt: skip
+
+
+def skill_vector(
+    context: SkillContext, cubes: Mapping[str, RigidTransform], X_WG: RigidTransform
+) -> np.ndarray:
+    """``observation.skill`` (see the module's table) from the measured poses now."""
+    from cake_drake.geometric.waypoints import face_yaw
+
+    p_G = X_WG.translation()
+    hand_yaw = _yaw(X_WG)
+    X_cube = cubes[context.cube]
+    out = np.zeros(SKILL_SIZE, np.float32)
+    out[SKILL_SCHEMAS.index(context.schema)] = 1.0
+    out[4:7] = X_cube.translation() - p_G
+    out[7] = _quarter(face_yaw(X_cube) - hand_yaw)
+    if context.target is None:  # a pick: up above the cube, at the transit height
+        target = np.array([*X_cube.translation()[:2], context.z_transit])
+        out[11] = 0.0
+    else:
+        target = context.target
+        if context.schema == "stack":  # the lower cube as measured now
+            from cake_drake.world.scene import CUBE_SIZE
+
+            target = cubes[context.other].translation() + [0.0, 0.0, CUBE_SIZE]
+        out[11] = _quarter(context.target_yaw - hand_yaw)
+    out[8:11] = target - p_G
+    out[12] = context.z_transit - p_G[2]
+    return out
+
+
+def ground_row(context: SkillContext | None, cubes: Sequence[str], position: int) -> np.ndarray:
+    """``ground_action`` (see the module's table) for ``context`` (None: no action)."""
+    if context is None:
+        return NO_GROUND_ACTION.copy()
+    index = {c: k for k, c in enumerate(cubes)}
+    return np.array([
+        SKILL_SCHEMAS.index(context.schema), index[context.cube],
+        index.get(context.other, -1) if context.other else -1, position,
+    ], np.int64)  # fmt: skip

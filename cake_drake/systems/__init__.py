@@ -31,6 +31,7 @@ class SourceContext:
     planner: Callable  # the run's planner, (problem, time_limit) -> Plan, for replanning
     period: float  # the simulation step (s), for a periodic update
     max_replans: int = 5
+    re_place: bool = False  # set a loose goal stack's cube down again (the monitor)
 
 
 #: Action sources by name, each a factory ``(SourceContext) -> System``: ``monitor`` (the
@@ -47,6 +48,7 @@ ACTION_SOURCES: dict[str, Callable[[SourceContext], LeafSystem]] = {
         c.planner,
         c.period,
         c.max_replans,
+        c.re_place,
     ),
 }
 

@@ -14,9 +14,13 @@ from cake_drake.errors import CakeDrakeError
 from cake_drake.symbolic import GroundAction, Plan, Problem, fact_str, validate_plan
 from cake_drake.symbolic.grounding import apply_action, ground_all
 from cake_drake.symbolic.kernels import kernels, latest_kernel
-from cake_drake.symbolic.roles import blocksworld_roles
+from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
 from cake_drake.systems.plan_source import ActionCommand, Refusal
-from cake_drake.world.facts import lost_cubes, read_facts
+from cake_drake.world.facts import STACK_TOL, lost_cubes, read_facts, stack_offsets
+
+#: m: a goal's stacked cube standing farther than this off the one below is set down
+#: again: the verdict's own tolerance, so the loop mends what the verdict would fail.
+LOOSE = STACK_TOL
 
 #: How long (s) the monitor waits for a disturbed world to come to rest before it judges.
 SETTLE_WAIT_S = 1.5
@@ -57,7 +61,11 @@ def _meets_forbidden(problem: Problem, actions, forbidden) -> bool:
 class ExecutionMonitor(LeafSystem):
     """Checks the measured world after every action against what the rest of the plan
     needs (its triangle-table kernels), skips ahead or repeats where a kernel holds, and
-    replans from the measured facts where none does.
+    replans from the measured facts where none does. With ``re_place``, a goal's stacked
+    cube that stands farther than :data:`LOOSE` off the one below (the verdict would fail
+    it, yet the facts hold) is set down again first: the cubes above it to the table,
+    then it picked and stacked once more (an event of kind ``re-place``, counted as a
+    replan).
 
     .. pydrake_system::
 
@@ -92,10 +100,12 @@ class ExecutionMonitor(LeafSystem):
         planner: Callable,
         period: float,
         max_replans: int = 5,
+        re_place: bool = False,
     ) -> None:
         super().__init__()
         self._problem = problem
         self._roles = blocksworld_roles(problem.domain)
+        self._goal = blocksworld_view(problem).goal  # canonical
         vocabulary = set(self._roles.vocabulary.as_dict().values())
         self._static = frozenset(f for f in problem.init if f[0] not in vocabulary)
         self._bodies = dict(cube_bodies)
@@ -103,6 +113,7 @@ class ExecutionMonitor(LeafSystem):
         self._X_HG = X_hand_grasp
         self._planner = planner
         self._max_replans = max_replans
+        self._re_place_loose = re_place
         self._done_port = self.DeclareVectorInputPort("actions_done", 1)
         self._poses_port = self.DeclareAbstractInputPort(
             "body_poses", AbstractValue.Make([RigidTransform()])
@@ -183,6 +194,10 @@ class ExecutionMonitor(LeafSystem):
                 state, replace(s, error=f"the world cannot be recovered: {'; '.join(unread)}")
             )
             return
+        loose = self._loose(context) if self._re_place_loose else None
+        if loose is not None and s.replans < self._max_replans:
+            self._set(state, replace(self._re_place(s, t, done, facts, loose), seen=done))
+            return
         nominal = s.pos + 1 if s.seen >= 0 else 0
         ks = kernels(self._problem, s.plan)
         i = latest_kernel(ks, facts)
@@ -202,6 +217,67 @@ class ExecutionMonitor(LeafSystem):
         if s.error is None and s.pos < len(s.plan):
             s = replace(s, emitted=s.emitted[:done] + (s.plan[s.pos],))
         self._set(state, replace(s, seen=done))
+
+    def _loose(self, context) -> tuple[str, str, float] | None:
+        """The lowest goal ``on`` fact whose upper cube stands farther than :data:`LOOSE`
+        off the lower one (cube, support, offset), with the hand empty; None if none."""
+        poses = self._poses_port.Eval(context)
+        cubes = {n: poses[i] for n, i in self._bodies.items()}
+        X_WG = poses[self._hand] @ self._X_HG
+        fingers = float(self._hand_port.Eval(context)[0])
+        reading = read_facts(cubes, X_WG=X_WG, finger_opening=fingers)
+        if ("arm-empty",) not in reading.facts:
+            return None
+        offsets = stack_offsets(cubes, reading.facts)
+        loose = [
+            (f[1], f[2], offsets[f[1]])
+            for f in self._goal & reading.facts
+            if f[0] == "on" and offsets.get(f[1], 0.0) > LOOSE
+        ]
+        return min(loose, key=lambda f: cubes[f[0]].translation()[2], default=None)
+
+    def _re_place(self, s: MonitorState, t: float, done: int, facts, loose) -> MonitorState:
+        """Set a loose goal stack's upper cube down again (the cubes above it put on the
+        table first), then the planner's plan from where that leads."""
+        cube, support, offset = loose
+        above = {f[2]: f[1] for f in self._roles.to_canonical(facts) if f[0] == "on"}
+        prefix = []
+        chain, top = [], cube
+        while top in above:
+            chain.append((above[top], top))
+            top = above[top]
+        for upper, lower in reversed(chain):
+            prefix += [self._roles.action(PICK, upper, lower), self._roles.action(PLACE, upper)]
+        prefix += [
+            self._roles.action(PICK, cube, support),
+            self._roles.action(PLACE, cube, support),
+        ]
+        after = frozenset(facts)
+        for action in prefix:
+            after = apply_action(self._problem, after, action)
+        event = {
+            "time_s": round(t, 3),
+            "after_action": str(s.emitted[done - 1]) if 0 < done <= len(s.emitted) else None,
+            "kind": "re-place",
+            "why": f"{cube} stands {offset * 1000:.1f} mm off {support}",
+        }
+        try:
+            result = self._planner(dataclasses.replace(self._problem, init=after), None)
+            rest = tuple(result.actions if isinstance(result, Plan) else result)
+            plan = tuple(prefix) + rest
+            check = validate_plan(dataclasses.replace(self._problem, init=frozenset(facts)), plan)
+            if not check.ok:
+                raise CakeDrakeError(check.message)
+        except CakeDrakeError as e:
+            return replace(s, events=s.events + (event,),
+                           error=f"the world cannot be recovered: no plan sets {cube} down "
+                           f"again ({e})")  # fmt: skip
+        event["new_plan"] = [str(a) for a in plan]
+        emitted = s.emitted[:done] + plan[:1]
+        return replace(
+            s, plan=plan, pos=0, replans=s.replans + 1, checks=s.checks + 1,
+            events=s.events + (event,), emitted=emitted, waiting_since=None,
+        )  # fmt: skip
 
     def _replan(self, s: MonitorState, t: float, done: int, facts, expected) -> MonitorState:
         event = self._event(t, done, "replan", s, expected, facts)

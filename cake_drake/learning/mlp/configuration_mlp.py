@@ -14,8 +14,10 @@ from lerobot.optim.schedulers import CosineDecayWithWarmupSchedulerConfig
 @dataclass
 class CakeMLPConfig(PreTrainedConfig):
     """A multilayer perceptron from the state (``observation.state`` and
-    ``observation.environment_state``) to a chunk of ``chunk_size`` actions, of which
-    ``n_action_steps`` are executed before it is asked again.
+    ``observation.environment_state``: a whole-task policy; or ``observation.state`` and
+    ``observation.skill``: a learned skill, conditioned on the ground action it executes)
+    to a chunk of ``chunk_size`` actions, of which ``n_action_steps`` are executed before
+    it is asked again.
 
     With ``relative_joints`` the arm's seven joint targets are learned as offsets from the
     measured joints (the gripper's width as itself): the network says where to move from
@@ -73,9 +75,13 @@ class CakeMLPConfig(PreTrainedConfig):
 
     def validate_features(self) -> None:
         if self.image_features:
-            raise ValueError("cake_mlp reads state only: train it with --inputs state")
-        if not self.robot_state_feature or not self.env_state_feature:
-            raise ValueError("cake_mlp needs observation.state and observation.environment_state")
+            raise ValueError("cake_mlp reads numbers only: train it with --inputs state or skill")
+        extra = ("observation.environment_state", "observation.skill")
+        if not self.robot_state_feature or not any(k in self.input_features for k in extra):
+            raise ValueError(
+                "cake_mlp needs observation.state and observation.environment_state (a "
+                "whole-task policy) or observation.skill (a learned skill)"
+            )
 
     @property
     def observation_delta_indices(self) -> list[int] | None:

@@ -10,7 +10,7 @@ from lerobot.utils.constants import ACTION
 from torch import Tensor
 
 from cake_drake.learning.mlp.configuration_mlp import CakeMLPConfig
-from cake_drake.learning.mlp.network import Chunks
+from cake_drake.learning.mlp.network import Chunks, input_sizes
 
 
 class CakeMLPPolicy(Chunks, PreTrainedPolicy):
@@ -22,13 +22,8 @@ class CakeMLPPolicy(Chunks, PreTrainedPolicy):
     def __init__(self, config: CakeMLPConfig, dataset_stats: dict | None = None, **kwargs):
         PreTrainedPolicy.__init__(self, config)
         config.validate_features()
-        self.build(
-            config,
-            config.robot_state_feature.shape[0],
-            config.env_state_feature.shape[0],
-            config.action_feature.shape[0],
-            dataset_stats,
-        )
+        inputs = input_sizes(config.input_features)
+        self.build(config, inputs, config.action_feature.shape[0], dataset_stats)
 
     def get_optim_params(self) -> dict:
         return self.parameters()

@@ -24,7 +24,24 @@ from torch import Tensor, nn
 ARM = 7
 OBS_STATE = "observation.state"
 OBS_ENV_STATE = "observation.environment_state"
+OBS_SKILL = "observation.skill"
 ACTION = "action"
+#: The inputs it reads besides ``observation.state``, and their buffers' names: the
+#: whole-task policy reads the cubes and the goal, a learned skill its ground action.
+EXTRA_INPUTS = {OBS_ENV_STATE: "env", OBS_SKILL: "skill"}
+
+
+def input_sizes(features: dict) -> dict[str, int]:
+    """The inputs a ``cake_mlp`` reads, in the order it reads them, and their sizes, from a
+    config's ``input_features`` (LeRobot's objects or a config.json's dicts)."""
+
+    def size(feature) -> int:
+        shape = feature["shape"] if isinstance(feature, dict) else feature.shape
+        return int(shape[0])
+
+    sizes = {OBS_STATE: size(features[OBS_STATE])} if OBS_STATE in features else {}
+    sizes.update({k: size(features[k]) for k in EXTRA_INPUTS if k in features})
+    return sizes
 
 
 def _stats(stats: dict | None, key: str, size: int, floor: float) -> tuple[Tensor, Tensor]:
@@ -41,22 +58,28 @@ class Chunks:
     """The policy's arithmetic, mixed into an ``nn.Module`` with a ``config`` (the fields
     of :class:`cake_drake.learning.mlp.CakeMLPConfig`)."""
 
-    def build(self, config, state: int, env: int, action_dim: int, stats=None) -> None:
-        """The statistics (buffers, saved with the weights) and the layers."""
+    def build(self, config, inputs: dict[str, int], action_dim: int, stats=None) -> None:
+        """The statistics (buffers, saved with the weights) and the layers, for ``inputs``
+        (:func:`input_sizes`: ``observation.state`` and one or more of
+        :data:`EXTRA_INPUTS`)."""
         self.config = config
         self.action_dim = action_dim
-        if config.relative_joints and (action_dim < ARM or state < ARM):
+        if OBS_STATE not in inputs or len(inputs) < 2:
+            raise ValueError(
+                "cake_mlp reads observation.state and "
+                + " or ".join(EXTRA_INPUTS) + f"; the features are {', '.join(inputs) or 'none'}"
+            )  # fmt: skip
+        if config.relative_joints and (action_dim < ARM or inputs[OBS_STATE] < ARM):
             raise ValueError("relative_joints needs 7 arm joints in the state and the action")
-        for name, key, size in (
-            ("state", OBS_STATE, state),
-            ("env", OBS_ENV_STATE, env),
-            ("action", ACTION, action_dim),
-        ):
+        self.input_keys = tuple(inputs)
+        names = {OBS_STATE: "state", **EXTRA_INPUTS, ACTION: "action"}
+        for key, size in (*inputs.items(), (ACTION, action_dim)):
             mean, std = _stats(stats, key, size, config.min_std)
-            self.register_buffer(f"{name}_mean", mean)
-            self.register_buffer(f"{name}_std", std)
+            self.register_buffer(f"{names[key]}_mean", mean)
+            self.register_buffer(f"{names[key]}_std", std)
+        self._buffers_of = {key: names[key] for key in inputs}
         layers: list[nn.Module] = []
-        width = (state + env) * config.n_obs_steps
+        width = sum(inputs.values()) * config.n_obs_steps
         for hidden in config.hidden_dims:
             layers += [nn.Linear(width, hidden), nn.GELU()]
             if config.dropout:
@@ -72,9 +95,12 @@ class Chunks:
 
     def _inputs(self, batch: dict[str, Tensor]) -> Tensor:
         """The standardised observations, oldest first, side by side: (B, n_obs_steps * D)."""
-        state = (batch[OBS_STATE] - self.state_mean) / self.state_std
-        env = (batch[OBS_ENV_STATE] - self.env_mean) / self.env_std
-        x = torch.cat([state, env], dim=-1)
+        parts = []
+        for key in self.input_keys:
+            name = self._buffers_of[key]
+            mean, std = getattr(self, f"{name}_mean"), getattr(self, f"{name}_std")
+            parts.append((batch[key] - mean) / std)
+        x = torch.cat(parts, dim=-1)
         if x.dim() == 3:  # (B, n_obs_steps, D): the frames before the current one
             x = x.flatten(1)
         if self.training and self.config.input_noise:
@@ -106,7 +132,7 @@ class Chunks:
         observation is kept for the next chunk's history (the first repeated before it, as
         LeRobot pads an episode's start)."""
         self.eval()
-        now = {k: batch[k] for k in (OBS_STATE, OBS_ENV_STATE)}
+        now = {k: batch[k] for k in self.input_keys}
         while len(self._seen) < self.config.n_obs_steps - 1:
             self._seen.append(now)
         self._seen.append(now)
@@ -120,13 +146,9 @@ class Chunks:
 class CakeMLPNetwork(Chunks, nn.Module):
     """The network alone, built from a checkpoint's configuration (:func:`load`)."""
 
-    def __init__(self, config, state: int, env: int, action_dim: int) -> None:
+    def __init__(self, config, inputs: dict[str, int], action_dim: int) -> None:
         nn.Module.__init__(self)
-        self.build(config, state, env, action_dim)
-
-
-def _shape(features: dict, key: str) -> int:
-    return int(features[key]["shape"][0])
+        self.build(config, inputs, action_dim)
 
 
 def load(folder: Path, device: str = "cpu") -> CakeMLPNetwork:
@@ -143,8 +165,6 @@ def load(folder: Path, device: str = "cpu") -> CakeMLPNetwork:
         )
     })  # fmt: skip
     inputs, outputs = data["input_features"], data["output_features"]
-    network = CakeMLPNetwork(
-        config, _shape(inputs, OBS_STATE), _shape(inputs, OBS_ENV_STATE), _shape(outputs, ACTION)
-    )
+    network = CakeMLPNetwork(config, input_sizes(inputs), int(outputs[ACTION]["shape"][0]))
     network.load_state_dict(load_file(str(folder / "model.safetensors")), strict=True)
     return network.to(device).eval()

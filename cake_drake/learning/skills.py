@@ -1,0 +1,132 @@
+"""A learned skill checkpoint as the geometric layer's skill (:mod:`cake_drake.systems.skills`).
+
+A skill is a ``cake_mlp`` trained with ``--inputs skill`` (``observation.state`` and
+``observation.skill``, on a recording cut into per-action segments): its checkpoint says
+so by its input features, so a scenario (``motion.skills``) and ``evaluate`` need no flag,
+and a whole-task policy given as a skill (or the reverse) is refused before anything is
+simulated (:func:`check_folder`, :func:`cake_drake.learning.checkpoint.check_folder`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from cake_drake.errors import InputError
+from cake_drake.learning.checkpoint import _config, device_for, is_skill, model_folder
+from cake_drake.policy.observations import SKILL_SIZE
+
+#: The action a skill answers in: seven joint targets and the gripper's width.
+SKILL_ACTION = 8
+
+
+def check_folder(path: Path, device: str = "cpu") -> Path:
+    """Refuse, in one line, a folder that is no skill checkpoint: not a checkpoint, a
+    whole-task policy, another skill layout or action space, a device that is not here.
+    The model's folder."""
+    from cake_drake.learning.dataset import require_lerobot
+
+    require_lerobot()
+    folder = model_folder(path)
+    config = _config(folder)
+    if not is_skill(config):
+        raise InputError(
+            f"{path}: a whole-task policy (it reads {', '.join(config.get('input_features', {}))}"
+            "), not a learned skill; run it as reference: !Policy {checkpoint: ...}, or give "
+            "motion.skills a checkpoint trained with --inputs skill"
+        )
+    if config.get("type") != "cake_mlp":
+        raise InputError(f"{path}: a skill of type {config.get('type')!r}; skills are cake_mlp")
+    size = config["input_features"]["observation.skill"]["shape"][0]
+    if size != SKILL_SIZE:
+        raise InputError(
+            f"{path}: its observation.skill has {size} numbers; this cake_drake's has "
+            f"{SKILL_SIZE} (pick-up, unstack, put-down, stack: train it again)"
+        )
+    action = config.get("output_features", {}).get("action", {}).get("shape", [0])[0]
+    if action != SKILL_ACTION:
+        raise InputError(
+            f"{path}: the skill predicts {action} numbers an action; a skill answers in "
+            f"joint_position ({SKILL_ACTION}: 7 joints and the gripper)"
+        )
+    device_for(device)
+    return folder
+
+
+class CheckpointSkill:
+    """The skill of a checkpoint folder: ``reset()`` at each new action, ``act`` a dict of
+    ``observation.state`` and ``observation.skill`` -> 8 numbers."""
+
+    def __init__(self, path: str, device: str = "cpu") -> None:
+        from cake_drake.learning.mlp.network import load
+
+        self.folder = check_folder(Path(path), device)
+        self.device = device_for(device)
+        self.network = load(self.folder, self.device)
+
+    def reset(self) -> None:
+        self.network.reset()
+
+    def act(self, observation) -> np.ndarray:
+        import torch
+
+        batch = {
+            key: torch.as_tensor(np.asarray(observation[key], np.float32)).unsqueeze(0)
+            for key in self.network.input_keys
+        }
+        with torch.inference_mode():
+            action = self.network.select_action({k: v.to(self.device) for k, v in batch.items()})
+        return action.squeeze(0).cpu().numpy().astype(np.float64)
+
+
+def make(path: str, device: str = "cpu") -> CheckpointSkill:
+    """The plug-in's factory (``motion.skills``: a checkpoint folder)."""
+    return CheckpointSkill(path, device)
+
+
+def episode(spec, seed: int) -> dict:
+    """One evaluation episode of a skill checkpoint (``spec.options["path"]``): the episode
+    ``spec.env()`` would run from ``seed`` (the same problem and placement), run instead
+    with the planner's plan, the execution monitor (setting a loose goal stack down
+    again: ``re_place``) and the skills as the geometric layer
+    (an empty path: the classical geometric layer, for the row beside it); its row (as
+    :func:`cake_drake.learning.rollout.rollout`'s, with the monitor's repeats and
+    replans)."""
+    import time
+
+    from cake_drake.pipeline import check, get_plan, run
+    from cake_drake.policy.spaces import step_budget
+    from cake_drake.scenario import Planned
+    from cake_drake.symbolic.roles import blocksworld_view
+
+    t0 = time.perf_counter()
+    scenario = spec.env().episode_scenario(seed)
+    scenario.reference = Planned(re_place=True)
+    scenario.cameras = []
+    motion = scenario.motion
+    motion.skills = str(spec.options.get("path") or "")
+    motion.skill_device = str(spec.options.get("device", "cpu"))
+    motion.skill_rate_hz = spec.rate_hz
+    # The whole-task policy's budget for the same episode (steps of the same rate).
+    n_actions = len(get_plan(check(scenario, write=False)).actions)
+    budget = step_budget(spec.max_steps, n_actions, spec.rate_hz)
+    scenario.simulation.max_sim_s = budget / spec.rate_hz
+    result = run(scenario, write=False)
+    monitoring = result.execution.monitoring
+    skills = monitoring.get("skills") or {}
+    events = monitoring.get("events", [])
+    ok = result.success
+    reason = "goal reached" if ok else result.message
+    return {
+        "seed": seed,
+        "success": ok,
+        "reason": reason,
+        "steps": int(skills.get("steps", round(result.execution.sim_s * spec.rate_hz))),
+        "wall_s": time.perf_counter() - t0,
+        "task": "",
+        "blocks": len(blocksworld_view(result.problem).blocks),
+        "repeats": sum(e.get("kind") == "repeat" for e in events),
+        "replans": int(monitoring.get("replans", 0)),
+        "budget": budget,
+    }

@@ -1,0 +1,256 @@
+"""``LearnedSkills``: the geometric layer learned, one ground action at a time.
+
+.. pydrake_system::
+
+    name: LearnedSkills
+    input_ports:
+    - action
+    - body_poses
+    - arm_state
+    - hand_state
+    output_ports:
+    - desired_state
+    - desired_acceleration
+    - finger_state
+    - actions_done
+    - labels
+    - infeasible
+
+The same ports as :class:`~cake_drake.systems.waypoint_ik.WaypointIk`: the action source
+(the planner's plan, the execution monitor) gives a ground action; where ``WaypointIk``
+would compute waypoints and IK, a learned skill is asked every ``1 / rate_hz`` simulated
+seconds for the arm's seven joint targets and the gripper's width, from the joints and
+the action's own numbers (``observation.skill``:
+:func:`cake_drake.policy.observations.skill_vector`, its targets fixed when the action
+starts as the classical layer fixes its waypoints). The skill is any object with
+``reset()`` (a new action: no history) and ``act(observation) -> 8 numbers``; a
+checkpoint's adapter is made through the plug-in door, so nothing here imports the
+learning code.
+
+An action ends when its effects hold in the measured world (:func:`effects_hold`): a
+picked cube in the closed hand at the transit height, or a placed cube resting where
+the action puts it with the hand open and back up at the transit height. It also ends
+when it runs out of its ``budget`` of control periods: either way ``actions_done``
+counts it and the action source judges the world, as after a classical action (the
+monitor repeats an action whose effects are missing, or replans). The same ground action
+failing
+:data:`MAX_TRIES` times in a row stops the run, named; so does a skill that answers
+NaN (exit 3, naming the skill and the action).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import LeafSystem
+
+from cake_drake.errors import ExecutionError
+from cake_drake.policy.observations import SkillContext, skill_context, skill_vector
+from cake_drake.symbolic import GroundAction
+from cake_drake.systems.plan_source import ActionCommand, Refusal
+from cake_drake.systems.waypoint_ik import REFERENCE_PORTS, WorldIndices
+from cake_drake.world.facts import read_facts
+from cake_drake.world.scene import CUBE_SIZE
+
+#: m below the transit height the grasp frame may be when a pick or a place counts as done.
+LIFT_TOL = 0.02
+#: The same ground action ended without its effects this many times in a row: the run
+#: stops (the skill cannot do it here).
+MAX_TRIES = 3
+#: Control periods an action may take (15 s at 10 Hz) unless the scenario says.
+DEFAULT_BUDGET = 150
+GRIPPER_MAX = 0.08
+
+
+def effects_hold(
+    context: SkillContext, cubes, X_WG: RigidTransform, finger: float, clearance: float = 0.05
+) -> bool:
+    """Whether the action of ``context`` is done in the measured world, ending where the
+    classical layer's would (so the next action starts from where its demonstrations
+    did): picked (the cube held, the hand up at the transit height) or placed (resting on
+    its support or the table, the hand open and back up at the transit height, which now
+    clears the cube just placed by ``clearance``)."""
+    facts = read_facts(cubes, X_WG=X_WG, finger_opening=finger).facts
+    z = X_WG.translation()[2]
+    if context.target is None:  # pick-up, unstack
+        return ("holding", context.cube) in facts and z >= context.z_transit - LIFT_TOL
+    rests = ("on", context.cube, context.other) if context.other else ("on-table", context.cube)
+    above = cubes[context.cube].translation()[2] + CUBE_SIZE + clearance
+    up = z >= max(context.z_transit, above) - LIFT_TOL
+    return rests in facts and ("arm-empty",) in facts and up
+
+
+@dataclass(frozen=True)
+class SkillProgress:
+    """Immutable: Drake's state copies share it. Read as ``WaypointIk``'s ``Progress``."""
+
+    done: int = 0  # actions ended (their effects held, or their budget ran out)
+    working: int = -1  # index of the action under way, -1 when idle
+    action: GroundAction | None = None  # the action under way, in the domain's names
+    context: SkillContext | None = None
+    steps: int = 0  # control periods of the action under way
+    tries: int = 0  # ends without effects of the same action, in a row
+    last_failed: GroundAction | None = None
+    error: str | None = None
+    warnings: tuple[str, ...] = ()
+    #: Totals for the run's summary: actions ended by their effects, by their budget,
+    #: and the skill's control periods.
+    succeeded: int = 0
+    timed_out: int = 0
+    total_steps: int = 0
+
+    def __deepcopy__(self, memo):
+        return self
+
+
+class LearnedSkills(LeafSystem):
+    """See the module's docstring. ``meaning`` maps the domain's ground action to the
+    exercise's names (as ``WaypointIk``'s); ``label`` names the skill in messages."""
+
+    def __init__(
+        self,
+        skill,
+        label: str,
+        world: WorldIndices,
+        q_start: np.ndarray,
+        rate_hz: float,
+        budget: int,
+        meaning: Callable[[GroundAction], GroundAction],
+        waypoints=None,
+    ) -> None:
+        super().__init__()
+        self.skill, self.label, self.world = skill, label, world
+        self.budget, self.meaning, self._params = budget, meaning, waypoints
+        self._clearance = getattr(waypoints, "transit_clearance", 0.05)
+        self.period_s = 1.0 / rate_hz
+        self._action = self.DeclareAbstractInputPort(
+            "action", AbstractValue.Make(ActionCommand(0, None))
+        )
+        self._poses = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()])
+        )
+        self._arm = self.DeclareVectorInputPort("arm_state", 14)
+        self._hand = self.DeclareVectorInputPort("hand_state", 4)
+        self._state = self.DeclareAbstractState(AbstractValue.Make(SkillProgress()))
+        q0 = np.asarray(q_start, float)
+        initial = {
+            "desired_state": np.r_[q0, np.zeros(7)],
+            "desired_acceleration": np.zeros(7),
+            "finger_state": np.array([0.04, 0.04, 0.0, 0.0]),
+            "actions_done": np.zeros(1),
+            "labels": np.array([0.0, -1.0]),
+        }
+        self._groups = {}
+        for name, size in REFERENCE_PORTS.items():
+            assert initial[name].shape == (size,)
+            self._groups[name] = self.DeclareDiscreteState(initial[name])
+            self.DeclareStateOutputPort(name, self._groups[name])
+        self.DeclareAbstractOutputPort(
+            "infeasible",
+            lambda: AbstractValue.Make(Refusal()),
+            lambda context, out: out.set_value(Refusal()),  # a skill refuses nothing ahead
+        )
+        self.DeclarePeriodicUnrestrictedUpdateEvent(self.period_s, 0.0, self._update)
+
+    # --- what the rest of the run reads (as WaypointIk's) ---------------------------------
+
+    checker = None  # no planned moves to check
+    planning = None
+
+    def progress(self, context) -> SkillProgress:
+        return context.get_abstract_state(self._state).get_value()
+
+    # --- one control period ---------------------------------------------------------------
+
+    def _measure(self, context):
+        poses = self._poses.Eval(context)
+        w = self.world
+        cubes = {name: poses[i] for name, i in w.cube_bodies.items()}
+        X_WG = poses[w.hand_body] @ w.X_hand_grasp
+        return cubes, X_WG, float(self._hand.Eval(context)[0])
+
+    def _update(self, context, state) -> None:
+        prog = self.progress(context)
+        if prog.error is not None:
+            return
+        cubes, X_WG, finger = self._measure(context)
+        if prog.working < 0:
+            prog = self._start(context, prog, cubes)
+            if prog.working < 0 or prog.error is not None:
+                self._set(state, prog)
+                return
+        if effects_hold(prog.context, cubes, X_WG, finger, self._clearance):
+            self._set(state, self._end(prog, True))
+            return
+        if prog.steps >= self.budget:
+            self._set(state, self._end(prog, False))
+            return
+        arm = self._arm.Eval(context)
+        hand = self._hand.Eval(context)
+        observation = {
+            "observation.state": np.r_[arm[:7], hand[0] + hand[1]].astype(np.float32),
+            "observation.skill": skill_vector(prog.context, cubes, X_WG),
+        }
+        answer = np.asarray(self.skill.act(observation), float).reshape(-1)
+        if answer.shape != (8,) or not np.all(np.isfinite(answer)):
+            raise ExecutionError(
+                f"skill {self.label!r} answered {np.array2string(answer, precision=3)[:60]} "
+                f"for {prog.action} (action {prog.working + 1}); a skill answers 8 finite "
+                "numbers (7 joint targets, the gripper's width)"
+            )
+        width = float(np.clip(answer[7], 0.0, GRIPPER_MAX))
+        desired = np.r_[answer[:7], np.zeros(7)]
+        state.get_mutable_discrete_state(self._groups["desired_state"]).set_value(desired)
+        fingers = np.array([width / 2, width / 2, 0.0, 0.0])
+        state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
+        self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))
+
+    def _start(self, context, prog: SkillProgress, cubes) -> SkillProgress:
+        cmd = self._action.Eval(context)
+        if not (isinstance(cmd, ActionCommand) and isinstance(cmd.index, int)):
+            return replace(prog, error=f"the action source gave {cmd!r:.80}; it gives an "
+                           "ActionCommand(index: int, action: GroundAction or None)")  # fmt: skip
+        if cmd.action is None or cmd.index != prog.done:
+            return prog
+        try:
+            meaning = self.meaning(cmd.action)
+            ctx = skill_context(meaning, cubes, self.world.slots, self._params)
+        except Exception as e:  # noqa: BLE001 - an action the skill cannot take, named
+            return replace(prog, error=f"action {cmd.index + 1} {cmd.action}: {e}")
+        self.skill.reset()
+        return replace(prog, working=cmd.index, action=cmd.action, context=ctx, steps=0)
+
+    def _end(self, prog: SkillProgress, held: bool) -> SkillProgress:
+        """The action is over: counted done for the action source to judge."""
+        tries = 0 if held else (prog.tries + 1 if prog.last_failed == prog.action else 1)
+        error = None
+        if tries >= MAX_TRIES:
+            error = (
+                f"skill {self.label!r} did not do {prog.action} in {MAX_TRIES} tries of "
+                f"{self.budget} steps each"
+            )
+        return replace(
+            prog,
+            done=prog.done + 1,
+            working=-1,
+            context=None,
+            steps=0,
+            tries=tries,
+            last_failed=None if held else prog.action,
+            error=error,
+            succeeded=prog.succeeded + held,
+            timed_out=prog.timed_out + (not held),
+        )
+
+    def _set(self, state, prog: SkillProgress) -> None:
+        state.get_mutable_abstract_state(self._state).set_value(prog)
+        count = np.array([float(prog.done)])
+        state.get_mutable_discrete_state(self._groups["actions_done"]).set_value(count)
+        # The phase a plot colours: the first of the classical layer's for a pick or a place.
+        phase = 0.0 if prog.context is None or prog.context.target is None else 3.0
+        labels = np.array([phase, float(prog.working)])
+        state.get_mutable_discrete_state(self._groups["labels"]).set_value(labels)

@@ -1,0 +1,256 @@
+"""Learned skills under the classical top: the ground action recorded per frame, a skill
+trained through LeRobot's loop on the per-action segments, run as the geometric layer
+beside the planner and the execution monitor (a run, evaluate), each layer labelled.
+
+Real recordings (Drake, the closed-loop expert, lerobot's writer), LeRobot's training
+loop, the shipped skills.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
+SHIPPED = ROOT / "models" / "policies" / "skills"
+
+pytestmark = pytest.mark.slow
+
+
+def cli(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", *args], cwd=ROOT, capture_output=True, text=True,
+        timeout=timeout, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    """Two demonstrations of the skills task (generated five-cube problems), no cameras."""
+    out = tmp_path_factory.mktemp("skills") / "ds"
+    r = cli("cake_drake.record", str(LEARNING), "--name", "skills", "--episodes", "2",
+            "--no-cameras", "--workers", "1", "--out", str(out))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def skill(recording, tmp_path_factory) -> Path:
+    """A skill trained a few steps with the task's recipe (--inputs skill, from report.json)."""
+    out = tmp_path_factory.mktemp("skill") / "train"
+    r = cli("cake_drake.train", str(recording), "--out", str(out), "--steps", "20",
+            "--batch-size", "32")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    config = json.loads((out / "checkpoints/last/pretrained_model/config.json").read_text())
+    assert set(config["input_features"]) == {"observation.state", "observation.skill"}
+    return out
+
+
+def scenario_file(tmp_path: Path, body: str) -> Path:
+    path = tmp_path / "scenario.yaml"
+    path.write_text(body)
+    return path
+
+
+def test_the_ground_action_is_recorded_per_frame_and_cuts_the_recording(recording):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from cake_drake.learning.batches import ColumnDataset
+    from cake_drake.policy.observations import SKILL_SCHEMAS
+
+    chunk = {"action": [k / 10 for k in range(10)], "observation.skill": [-0.1, 0.0]}
+    base = LeRobotDataset("cake_drake/stack", root=recording, delta_timestamps=chunk,
+                          video_backend="pyav")  # fmt: skip
+    assert base.meta.features["observation.skill"]["shape"] == (13,)
+    data = ColumnDataset(base, ["observation.state", "observation.skill"])
+    ground = data.columns["ground_action"]
+    episode = data.columns["episode_index"]
+    report = json.loads((recording / "report.json").read_text())
+    # Every ground action of the expert's plan shows, in order, one segment each.
+    for k in range(report["episodes"]):
+        rows = ground[episode == k]
+        under_way = rows[rows[:, 0] >= 0]
+        changes = np.flatnonzero(np.any(np.diff(under_way, axis=0) != 0, axis=1))
+        segments = [under_way[0], *under_way[changes + 1]]
+        assert [int(s[3]) for s in segments] == list(range(len(segments)))
+        schemas = {SKILL_SCHEMAS[int(s[0])] for s in segments}
+        assert schemas <= set(SKILL_SCHEMAS) and len(segments) >= 2
+        # observation.skill one-hot says the same schema as ground_action.
+        skills = data.columns["observation.skill"][episode == k][rows[:, 0] >= 0]
+        assert np.array_equal(np.argmax(skills[:, :4], axis=1), under_way[:, 0])
+    # A segment's last frame: its action chunk stops at the segment, padded as at an
+    # episode's end; its first frame: the history is padded before it.
+    boundary = np.flatnonzero(np.any(np.diff(ground, axis=0) != 0, axis=1))
+    last = int(boundary[1])  # the first ground action's last frame (after the wait, if any)
+    if episode[last] != episode[last + 1]:
+        pytest.skip("no boundary inside an episode")  # the fixture always has one
+    sample = data[last]
+    assert sample["action_is_pad"].tolist() == [False] + [True] * 9
+    assert np.array_equal(sample["action"][1:], np.repeat(sample["action"][:1], 9, axis=0))
+    first = data[last + 1]
+    assert first["observation.skill_is_pad"].tolist() == [True, False]
+    # LeRobot's own reading of the same frame crosses into the next action: only the cut
+    # stops there.
+    assert not base[last]["action_is_pad"][1]
+
+
+def test_a_skill_runs_under_the_planner_and_the_monitor_handles_its_failure(skill, tmp_path):
+    out = tmp_path / "run"
+    path = scenario_file(tmp_path, f"""
+short:
+  task: {{problem: "package://cake_drake/pddl/stack2.pddl"}}
+  motion: {{skills: "{skill}", skill_max_steps: 15}}
+  outputs: {{render: false}}
+""")  # fmt: skip
+    r = cli("cake_drake.run", "--scenario", str(path), "--name", "short", "--out", str(out))
+    assert r.returncode == 3, r.stderr
+    assert "did not do (pick-up a) in 3 tries of 15 steps each" in r.stderr
+    assert "geometric learned (skills (" in r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["layers"]["geometric"]["kind"] == "learned"
+    assert summary["layers"]["symbolic"]["kind"] == "classical"
+    assert summary["skills"]["budget_ran_out"] == 3 and summary["skills"]["steps"] == 45
+    assert summary["repeats"] == 2  # the monitor gave the same action again, twice
+
+
+def test_evaluate_runs_a_skill_checkpoint_under_the_named_scenarios_planner(skill, tmp_path):
+    out = tmp_path / "eval"
+    r = cli("cake_drake.evaluate", str(skill), "--suite", str(LEARNING), "--name", "stack2",
+            "--episodes", "1", "--seed", "100000", "--workers", "1", "--out", str(out))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["episodes"] == 1 and "monitor" in summary
+    assert "repeats" in (out / "results.csv").read_text().splitlines()[0]
+
+
+def test_a_skill_and_a_whole_task_policy_are_not_taken_for_each_other(skill, tmp_path):
+    as_policy = scenario_file(tmp_path, f"""
+wrong:
+  reference: !Policy {{checkpoint: "{skill}"}}
+""")  # fmt: skip
+    r = cli("cake_drake.run", "--scenario", str(as_policy), "--name", "wrong", "--out",
+            str(tmp_path / "a"))  # fmt: skip
+    assert r.returncode == 2 and "a learned skill" in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    (tmp_path / "b").mkdir()
+    as_skill = tmp_path / "b" / "s.yaml"
+    as_skill.write_text('wrong:\n  motion: {skills: "package://cake_drake/policies/stack2"}\n')
+    r = cli("cake_drake.run", "--scenario", str(as_skill), "--name", "wrong", "--out",
+            str(tmp_path / "c"))  # fmt: skip
+    assert r.returncode == 2 and "a whole-task policy" in r.stderr, r.stderr
+    assert not (tmp_path / "c").exists()  # refused before anything ran
+
+
+def test_a_skill_that_answers_nan_stops_the_run_naming_it(skill, tmp_path):
+    import torch
+    from safetensors.torch import load_file, save_file
+
+    bad = tmp_path / "nan_skill"
+    shutil.copytree(skill / "checkpoints" / "last" / "pretrained_model", bad)
+    weights = load_file(str(bad / "model.safetensors"))
+    weights = {k: (v * float("nan") if k.startswith("net.") else v) for k, v in weights.items()}
+    save_file({k: v.contiguous() for k, v in weights.items()}, str(bad / "model.safetensors"))
+    assert torch.isnan(load_file(str(bad / "model.safetensors"))["net.0.weight"]).all()
+    path = scenario_file(tmp_path, f'nan:\n  motion: {{skills: "{bad}"}}\n')
+    r = cli("cake_drake.run", "--scenario", str(path), "--name", "nan", "--out",
+            str(tmp_path / "out"))  # fmt: skip
+    assert r.returncode == 3, r.stderr
+    line = r.stderr.strip().splitlines()[-1]
+    assert "nan_skill" in line and "(unstack a b)" in line and "8 finite numbers" in line
+
+
+def test_each_layer_is_labelled_classical_or_learned():
+    from cake_drake.outputs.report import layers, layers_line
+    from cake_drake.scenario import load_scenario
+
+    classical = load_scenario(ROOT / "models" / "scenarios" / "exercise.yaml", "torque")
+    text = layers_line(layers(classical, None))
+    assert text.startswith("layers: symbolic classical (")
+    assert "geometric classical (waypoints, IK (drake), straight moves)" in text
+    assert "dynamic classical (computed torque, InverseDynamicsController)" in text
+    whole = layers(load_scenario(LEARNING, "learned_stack2"), None)
+    assert whole["symbolic"] == whole["geometric"]
+    assert whole["geometric"]["kind"] == "learned"
+    assert "policies/stack2" in whole["geometric"]["what"]
+    skills = layers(load_scenario(LEARNING, "learned_tower5"), None)
+    assert skills["symbolic"]["kind"] == "classical"
+    assert skills["geometric"] == {
+        "kind": "learned",
+        "what": "skills (package://cake_drake/policies/skills)",
+    }
+    assert skills["dynamic"]["kind"] == "classical"
+
+
+def test_the_shipped_learned_tower5_builds_the_tower(tmp_path):
+    r = cli("cake_drake.run", "--scenario", str(LEARNING), "--name", "learned_tower5",
+            "--out", str(tmp_path / "t5"))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("goal reached: a on b on c on d on e")
+    assert ("layers: symbolic classical (astar-lmcut) · geometric learned (skills "
+            "(package://cake_drake/policies/skills))") in r.stderr  # fmt: skip
+    assert (SHIPPED / "README.md").is_file()
+    size = sum(p.stat().st_size for p in SHIPPED.rglob("*") if p.is_file())
+    assert size <= 10 * 2**20
+
+
+def test_a_skill_reads_its_action_relative_to_the_hand_and_ends_where_the_classical_layer_does():
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from cake_drake.policy.observations import skill_context, skill_vector
+    from cake_drake.symbolic import GroundAction
+    from cake_drake.systems.skills import effects_hold
+    from cake_drake.world.scene import SLOTS
+
+    down = RotationMatrix.MakeXRotation(np.pi)
+    cubes = {
+        "a": RigidTransform([0.5, 0.1, 0.02]),
+        "b": RigidTransform([0.5, -0.1, 0.02]),
+        "z": RigidTransform([0.3, 0.3, 0.02]),  # a cube the action does not name
+    }
+    stack = GroundAction("stack", ("a", "b"))
+    hand = RigidTransform(down, [0.5, 0.1, 0.2])
+    ctx = skill_context(stack, cubes, SLOTS)
+    v = skill_vector(ctx, cubes, hand)
+    assert v[:4].tolist() == [0, 0, 0, 1]
+    assert np.allclose(v[4:7], [0.0, 0.0, -0.18]) and np.allclose(v[8:11], [0.0, -0.2, -0.14])
+    # The same numbers whatever other cubes there are, and however they are named.
+    fewer = {k: X for k, X in cubes.items() if k != "z"}
+    assert np.allclose(skill_vector(skill_context(stack, fewer, SLOTS), fewer, hand), v)
+    # Placed, the hand open: done only once the hand is back up at the transit height.
+    placed = {**cubes, "a": RigidTransform([0.5, -0.1, 0.06])}
+    low = RigidTransform(down, [0.5, -0.1, 0.12])
+    assert not effects_hold(ctx, placed, low, finger=0.04)
+    high = RigidTransform(down, [0.5, -0.1, ctx.z_transit + 0.04])
+    assert effects_hold(ctx, placed, high, finger=0.04)
+    assert not effects_hold(ctx, cubes, high, finger=0.04)  # a is not on b
+    # Picked: held in the closed hand at the transit height.
+    pick = skill_context(GroundAction("pick-up", ("a",)), cubes, SLOTS)
+    up = RigidTransform(down, [0.5, 0.1, pick.z_transit])
+    lifted = {**cubes, "a": RigidTransform([0.5, 0.1, pick.z_transit])}
+    assert effects_hold(pick, lifted, up, finger=0.019)
+    assert not effects_hold(pick, lifted, up, finger=0.04)  # open: not held
+
+
+def test_no_system_of_the_diagram_imports_the_run():
+    """The Diagram's systems know nothing of the run (no circle diagram -> systems ->
+    pipeline/execution -> diagram), nor of the learning code above them."""
+    banned = ("cake_drake.pipeline", "cake_drake.execution", "cake_drake.diagram",
+              "cake_drake.learning", "cake_drake.cli")  # fmt: skip
+    for path in sorted((ROOT / "cake_drake" / "systems").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            for name in names:
+                assert not name.startswith(banned), f"{path.name} imports {name}"
