@@ -28,6 +28,7 @@ import contextlib
 import json
 import os
 import sys
+import warnings
 from dataclasses import asdict
 from pathlib import Path
 
@@ -226,6 +227,9 @@ def train(
     datasets.require_lerobot()
     keys = check(root, out, recipe, device, resume)
     os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+    # The datasets library warns at each table it opens that its progress bars stay off,
+    # which the environment asks for (cake_drake.learning.dataset.require_lerobot).
+    warnings.filterwarnings("ignore", message="Cannot enable progress bars")
     from lerobot.configs.default import DatasetConfig
     from lerobot.configs.train import TrainPipelineConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
