@@ -206,8 +206,8 @@ def skills(args) -> None:
                         policy=SKILL_POLICY,
                         options={"path": path, "device": "cpu"},
                     )
-                    if size is not None:
-                        spec = replace(spec, blocks=(size, size), problem=None)
+                    if size is not None:  # the budget scaled to each problem's plan
+                        spec = replace(spec, blocks=(size, size), problem=None, max_steps=0)
                     seeds = [args.eval_seed + k for k in range(args.episodes)]
                     _, summary = evaluate_here(spec, seeds, len(os.sched_getaffinity(0)))
                     out.parent.mkdir(parents=True, exist_ok=True)

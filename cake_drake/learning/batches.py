@@ -82,8 +82,10 @@ def _column(table, key: str) -> np.ndarray:
     import pyarrow as pa
 
     column = table.column(key).combine_chunks()
-    if pa.types.is_list(column.type) or pa.types.is_large_list(column.type) or (
-        pa.types.is_fixed_size_list(column.type)
+    if (
+        pa.types.is_list(column.type)
+        or pa.types.is_large_list(column.type)
+        or (pa.types.is_fixed_size_list(column.type))
     ):
         values = column.flatten().to_numpy(zero_copy_only=False)
         return np.ascontiguousarray(values.reshape(len(column), -1))

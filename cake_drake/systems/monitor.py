@@ -41,6 +41,9 @@ class MonitorState:
     waiting_since: float | None = None  # the world was not at rest: waiting since then
     #: (measured facts, action) pairs the geometric layer refused: not planned again there.
     forbidden: frozenset = frozenset()
+    #: The plan's first actions are a re-place, done in order (not skipped where a later
+    #: kernel holds: the cube goes to the table before it is stacked again).
+    forced: int = 0
 
     def __deepcopy__(self, memo):
         return self
@@ -63,8 +66,8 @@ class ExecutionMonitor(LeafSystem):
     needs (its triangle-table kernels), skips ahead or repeats where a kernel holds, and
     replans from the measured facts where none does. With ``re_place``, a goal's stacked
     cube that stands farther than :data:`LOOSE` off the one below (the verdict would fail
-    it, yet the facts hold) is set down again first: the cubes above it to the table,
-    then it picked and stacked once more (an event of kind ``re-place``, counted as a
+    it, yet the facts hold) is taken off first: it and the cubes above it to the table,
+    then the planner's plan from there (an event of kind ``re-place``, counted as a
     replan).
 
     .. pydrake_system::
@@ -201,6 +204,8 @@ class ExecutionMonitor(LeafSystem):
         nominal = s.pos + 1 if s.seen >= 0 else 0
         ks = kernels(self._problem, s.plan)
         i = latest_kernel(ks, facts)
+        if nominal < min(s.forced, len(ks)) and ks[nominal] <= facts:
+            i = nominal  # a re-place under way: its next action, whatever holds later
         s = replace(s, checks=s.checks + 1, waiting_since=None)
         if i is None:
             s = self._replan(s, t, done, facts, ks[min(nominal, len(ks) - 1)])
@@ -237,8 +242,8 @@ class ExecutionMonitor(LeafSystem):
         return min(loose, key=lambda f: cubes[f[0]].translation()[2], default=None)
 
     def _re_place(self, s: MonitorState, t: float, done: int, facts, loose) -> MonitorState:
-        """Set a loose goal stack's upper cube down again (the cubes above it put on the
-        table first), then the planner's plan from where that leads."""
+        """Set a loose goal stack's upper cube down again: it and the cubes above it put on
+        the table, then the planner's plan from there."""
         cube, support, offset = loose
         above = {f[2]: f[1] for f in self._roles.to_canonical(facts) if f[0] == "on"}
         prefix = []
@@ -248,10 +253,10 @@ class ExecutionMonitor(LeafSystem):
             top = above[top]
         for upper, lower in reversed(chain):
             prefix += [self._roles.action(PICK, upper, lower), self._roles.action(PLACE, upper)]
-        prefix += [
-            self._roles.action(PICK, cube, support),
-            self._roles.action(PLACE, cube, support),
-        ]
+        # Taken off and put on the table; the planner then stacks it again from there (a
+        # place straight back onto the cube it came from is no move any plan makes, and a
+        # learned skill has never been shown it).
+        prefix += [self._roles.action(PICK, cube, support), self._roles.action(PLACE, cube)]
         after = frozenset(facts)
         for action in prefix:
             after = apply_action(self._problem, after, action)
@@ -277,6 +282,7 @@ class ExecutionMonitor(LeafSystem):
         return replace(
             s, plan=plan, pos=0, replans=s.replans + 1, checks=s.checks + 1,
             events=s.events + (event,), emitted=emitted, waiting_since=None,
+            forced=len(prefix),
         )  # fmt: skip
 
     def _replan(self, s: MonitorState, t: float, done: int, facts, expected) -> MonitorState:
@@ -302,7 +308,9 @@ class ExecutionMonitor(LeafSystem):
                 error=f"the world cannot be recovered: no plan from the measured facts ({e})",
             )
         event["new_plan"] = [str(a) for a in actions]
-        return replace(s, plan=actions, pos=0, replans=s.replans + 1, events=s.events + (event,))
+        return replace(
+            s, plan=actions, pos=0, replans=s.replans + 1, events=s.events + (event,), forced=0
+        )
 
     def _avoid(self, s: MonitorState, context, done: int, refusal: Refusal) -> MonitorState:
         """Replan from the measured facts with ``refusal.action`` forbidden where the world
@@ -328,7 +336,7 @@ class ExecutionMonitor(LeafSystem):
             return replace(s, error=f"{stop}; no plan avoids it ({e})")
         event["new_plan"] = [str(a) for a in actions]
         emitted = s.emitted[:done] + actions[:1]
-        return replace(s, plan=actions, pos=0, replans=s.replans + 1, emitted=emitted)
+        return replace(s, plan=actions, pos=0, replans=s.replans + 1, emitted=emitted, forced=0)
 
     def _plan_avoiding(self, problem: Problem, forbidden) -> tuple[GroundAction, ...]:
         """A valid plan from ``problem.init`` that never takes an action where it is

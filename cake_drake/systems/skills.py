@@ -250,7 +250,12 @@ class LearnedSkills(LeafSystem):
         state.get_mutable_abstract_state(self._state).set_value(prog)
         count = np.array([float(prog.done)])
         state.get_mutable_discrete_state(self._groups["actions_done"]).set_value(count)
-        # The phase a plot colours: the first of the classical layer's for a pick or a place.
-        phase = 0.0 if prog.context is None or prog.context.target is None else 3.0
+        # The phase a plot shades (geometric.trajectory.PHASE_NAMES): a skill has no phases
+        # of its own, so a pick is shaded as the classical pick's first (pre-grasp) and a
+        # place as the classical place's first (transport); idle between actions.
+        if prog.context is None:
+            phase = 0.0
+        else:
+            phase = 1.0 if prog.context.target is None else 4.0
         labels = np.array([phase, float(prog.working)])
         state.get_mutable_discrete_state(self._groups["labels"]).set_value(labels)
