@@ -67,10 +67,12 @@ def test_the_ground_action_is_recorded_per_frame_and_cuts_the_recording(recordin
     from cake_drake.learning.batches import ColumnDataset
     from cake_drake.policy.observations import SKILL_SCHEMAS
 
-    chunk = {"action": [k / 10 for k in range(10)], "observation.skill": [-0.1, 0.0]}
+    chunk = {"action": [k / 10 for k in range(10)], "observation.state": [-0.1, 0.0]}
     base = LeRobotDataset("cake_drake/stack", root=recording, delta_timestamps=chunk,
                           video_backend="pyav")  # fmt: skip
-    assert base.meta.features["observation.skill"]["shape"] == (13,)
+    # Not an observation.* key: LeRobot's own tools take it for no policy's input.
+    assert base.meta.features["skill"]["shape"] == (13,)
+    assert not any(k.startswith("observation.skill") for k in base.meta.features)
     data = ColumnDataset(base, ["observation.state", "observation.skill"])
     ground = data.columns["ground_action"]
     episode = data.columns["episode_index"]

@@ -38,6 +38,8 @@ import torch
 INDEX_KEYS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 #: A learned skill's input, and the column that says which ground action a frame is in.
 SKILL, GROUND = "observation.skill", "ground_action"
+#: The recording's column a learned skill reads as ``observation.skill``.
+SKILL_COLUMN = "skill"
 
 
 def _segments(index: np.ndarray, episode: np.ndarray, ground: np.ndarray):
@@ -129,6 +131,8 @@ class ColumnDataset(torch.utils.data.Dataset):
             self._start, self._end = _segments(index, episode, self.columns[GROUND])
         deltas = _reader(base).delta_indices or {}
         self._deltas = {k: np.asarray(v, np.int64) for k, v in deltas.items()}
+        if wanted is not None and SKILL in wanted and SKILL_COLUMN in self.columns:
+            self._skill_input(meta)
         self._tasks = [str(name) for name in meta.tasks.index]
         self.frames: dict[str, np.ndarray] = {}
         self._frame_of: dict[str, np.ndarray] = {}
@@ -136,6 +140,21 @@ class ColumnDataset(torch.utils.data.Dataset):
             if wanted is not None and key not in wanted:
                 continue
             self._load_video(key, episode)
+
+    def _skill_input(self, meta) -> None:
+        """The recording's ``skill`` column handed out as the input ``observation.skill``:
+        an observation's history (``observation.state``'s deltas) and its statistics in
+        the dataset's, which the policy standardises with."""
+        column = self.columns.pop(SKILL_COLUMN)
+        self.columns[SKILL] = column
+        if "observation.state" in self._deltas:
+            self._deltas[SKILL] = self._deltas["observation.state"]
+        stats = getattr(meta, "stats", None)
+        if isinstance(stats, dict) and SKILL not in stats:
+            stats[SKILL] = {
+                "mean": column.mean(axis=0), "std": column.std(axis=0),
+                "min": column.min(axis=0), "max": column.max(axis=0),
+            }  # fmt: skip
 
     def _load_video(self, key: str, episode: np.ndarray) -> None:
         """Decode camera ``key``'s files once; each row's frame number in ``self.frames``."""

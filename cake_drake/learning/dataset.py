@@ -8,10 +8,10 @@ the layout of :mod:`cake_drake.policy.observations`),
 ``action`` (float32, the control mode's: 8 for ``joint_position``, 7 for ``ee_delta``: the
 demonstrator's label, also where noise or a learner changed what ran), ``actor`` (int64:
 who acted, 0 the demonstrator, 1 a learner in DAgger's rollouts),
-``observation.skill`` (float32, 13) and ``ground_action`` (int64, 4): the demonstrator's
-ground action under way, as a learned skill reads it and by name (the layout of
-:mod:`cake_drake.policy.observations`; a recording is cut into per-action segments where
-``ground_action`` changes), and lerobot's own
+``skill`` (float32, 13) and ``ground_action`` (int64, 4): the demonstrator's ground
+action under way, as a learned skill reads it (``observation.skill``'s numbers) and by
+name (the layout of :mod:`cake_drake.policy.observations`; a recording is cut into
+per-action segments where ``ground_action`` changes), and lerobot's own
 ``timestamp``, ``frame_index``, ``episode_index``, ``index`` and ``task_index``; the task
 is the episode's English instruction. ``lerobot`` is an optional extra
 (``pip install 'cake_drake[lerobot]'``, about 8 GB with torch); without it the commands
@@ -61,7 +61,12 @@ SKILL_NAMES = [f"is_{s.replace('-', '_')}" for s in SKILL_SCHEMAS] + [
     "target_dx", "target_dy", "target_dz", "target_dyaw", "transit_dz",
 ]  # fmt: skip
 GROUND_NAMES = ["schema", "cube", "other", "plan_position"]
-#: The ground action under way at a frame (see cake_drake.policy.observations).
+#: The ground action under way at a frame (see cake_drake.policy.observations): as a
+#: learned skill reads it (``observation.skill``'s numbers), and by name. Not
+#: ``observation.*`` keys, so LeRobot's own tools (``lerobot-train``) do not take them for
+#: a whole-task policy's inputs; ``train --inputs skill`` reads ``skill`` as
+#: ``observation.skill`` (cake_drake.learning.batches).
+SKILL = "skill"
 GROUND_ACTION = "ground_action"
 ACTION_NAMES = {
     "joint_position": STATE_NAMES,
@@ -123,7 +128,7 @@ def features(control_mode: str, cameras) -> dict:
             "names": ACTION_NAMES[control_mode],
         },
         ACTOR: {"dtype": "int64", "shape": (1,), "names": [ACTOR]},
-        "observation.skill": {"dtype": "float32", "shape": (SKILL_SIZE,), "names": SKILL_NAMES},
+        SKILL: {"dtype": "float32", "shape": (SKILL_SIZE,), "names": SKILL_NAMES},
         GROUND_ACTION: {"dtype": "int64", "shape": (GROUND_ACTION_SIZE,), "names": GROUND_NAMES},
     }
     for c in cameras:
@@ -193,7 +198,7 @@ def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  
                 "observation.environment_state": ep.environment[k],
                 "action": ep.actions[k],
                 ACTOR: np.asarray([actors[k]], np.int64),
-                "observation.skill": np.asarray(skills[k], np.float32),
+                SKILL: np.asarray(skills[k], np.float32),
                 GROUND_ACTION: np.asarray(grounds[k], np.int64),
                 "task": ep.task,
             }

@@ -71,9 +71,9 @@ def input_keys(features: dict, inputs: str, root: Path) -> list[str]:
     if "observation.state" in features:
         keys.append("observation.state")
     if inputs == "skill":
-        if "observation.skill" not in features:
+        if "skill" not in features and "observation.skill" not in features:
             raise InputError(
-                f"{root}: no observation.skill (the ground action under way), which a learned "
+                f"{root}: no skill column (the ground action under way), which a learned "
                 "skill needs: record it again with python -m cake_drake.record"
             )
         keys.append("observation.skill")
@@ -258,6 +258,11 @@ def train(
     else:
         meta = LeRobotDatasetMetadata(repo_id, root=root)
         features = dataset_to_policy_features(meta.features)
+        if "skill" in meta.features:  # read as observation.skill (learning.batches)
+            from lerobot.configs.types import FeatureType, PolicyFeature
+
+            shape = tuple(meta.features["skill"]["shape"])
+            features["observation.skill"] = PolicyFeature(type=FeatureType.STATE, shape=shape)
         policy = _policy_config(recipe, where, weights)
         if pretrained is not None:
             policy.pretrained_path = Path(pretrained)
