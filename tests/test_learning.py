@@ -323,7 +323,7 @@ def test_a_dataset_without_the_features_a_policy_needs_is_refused(trained, tmp_p
     ds = tmp_path / "ds"
     shutil.copytree(trained / "ds", ds)
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "images")
-    one_line(r, 2, "--policy mlp reads the state only, not --inputs images")
+    one_line(r, 2, "--policy mlp reads numbers only (--inputs state or skill), not --inputs images")
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "images",
              "--policy", "act")  # fmt: skip
     one_line(r, 2, "no camera features, which --inputs images needs")

@@ -122,5 +122,5 @@ def test_a_configuration_that_cannot_work_is_refused():
     inputs, outputs = features()
     inputs["observation.images.scene"] = PolicyFeature(FeatureType.VISUAL, (3, 96, 96))
     config = CakeMLPConfig(input_features=inputs, output_features=outputs)
-    with pytest.raises(ValueError, match="reads state only"):
+    with pytest.raises(ValueError, match="reads numbers only"):
         CakeMLPPolicy(config)
