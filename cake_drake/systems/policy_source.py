@@ -44,7 +44,7 @@ from pydrake.systems.sensors import ImageRgba8U
 from cake_drake.plugins import DURING, PluginError, guarded
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import Observation, environment_state, goal_table, pose7
-from cake_drake.systems.waypoint_ik import REFERENCE_PORTS, WorldIndices
+from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports
 from cake_drake.world.facts import GoalReading, read_goal
 
 #: Wall-clock budget (s) of one call to a policy's ``act``.
@@ -133,18 +133,7 @@ class PolicySource(LeafSystem):
             name: self.DeclareAbstractInputPort(f"image_{name}", AbstractValue.Make(ImageRgba8U()))
             for name in cameras
         }
-        initial = {
-            "desired_state": np.r_[self._q, np.zeros(7)],
-            "desired_acceleration": np.zeros(7),
-            "finger_state": np.array([0.04, 0.04, 0.0, 0.0]),
-            "actions_done": np.zeros(1),
-            "labels": np.array([0.0, -1.0]),
-        }
-        self._groups = {}
-        for name, size in REFERENCE_PORTS.items():
-            assert initial[name].shape == (size,)
-            self._groups[name] = self.DeclareDiscreteState(initial[name])
-            self.DeclareStateOutputPort(name, self._groups[name])
+        self._groups = declare_reference_ports(self, self._q)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
 
     # --- what the policy sees -------------------------------------------------------

@@ -52,7 +52,7 @@ from cake_drake.errors import ExecutionError
 from cake_drake.policy.observations import SkillContext, skill_context, skill_vector
 from cake_drake.symbolic import GroundAction
 from cake_drake.systems.plan_source import ActionCommand, Refusal
-from cake_drake.systems.waypoint_ik import REFERENCE_PORTS, WorldIndices
+from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports
 from cake_drake.world.facts import read_facts
 from cake_drake.world.scene import CUBE_SIZE
 
@@ -136,19 +136,7 @@ class LearnedSkills(LeafSystem):
         self._arm = self.DeclareVectorInputPort("arm_state", 14)
         self._hand = self.DeclareVectorInputPort("hand_state", 4)
         self._state = self.DeclareAbstractState(AbstractValue.Make(SkillProgress()))
-        q0 = np.asarray(q_start, float)
-        initial = {
-            "desired_state": np.r_[q0, np.zeros(7)],
-            "desired_acceleration": np.zeros(7),
-            "finger_state": np.array([0.04, 0.04, 0.0, 0.0]),
-            "actions_done": np.zeros(1),
-            "labels": np.array([0.0, -1.0]),
-        }
-        self._groups = {}
-        for name, size in REFERENCE_PORTS.items():
-            assert initial[name].shape == (size,)
-            self._groups[name] = self.DeclareDiscreteState(initial[name])
-            self.DeclareStateOutputPort(name, self._groups[name])
+        self._groups = declare_reference_ports(self, q_start)
         self.DeclareAbstractOutputPort(
             "infeasible",
             lambda: AbstractValue.Make(Refusal()),

@@ -31,6 +31,26 @@ REFERENCE_PORTS = {
 }
 
 
+def declare_reference_ports(system: LeafSystem, q_start: np.ndarray) -> dict[str, int]:
+    """Declare :data:`REFERENCE_PORTS` on ``system`` as state output ports, each its own
+    discrete state group, held at the start (``q_start`` at rest, fingers open, no
+    action); the groups' indices by port name. For a system that writes the reference
+    at its own rate (a policy, a learned skill) rather than ``WaypointIk``'s tape."""
+    initial = {
+        "desired_state": np.r_[np.asarray(q_start, float), np.zeros(7)],
+        "desired_acceleration": np.zeros(7),
+        "finger_state": np.array([0.04, 0.04, 0.0, 0.0]),
+        "actions_done": np.zeros(1),
+        "labels": np.array([0.0, -1.0]),
+    }
+    groups = {}
+    for name, size in REFERENCE_PORTS.items():
+        assert initial[name].shape == (size,)
+        groups[name] = system.DeclareDiscreteState(initial[name])
+        system.DeclareStateOutputPort(name, groups[name])
+    return groups
+
+
 @dataclass(frozen=True)
 class WorldIndices:
     """Where ``WaypointIk`` finds things in the plant's ``body_poses`` output."""
