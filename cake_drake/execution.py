@@ -240,7 +240,7 @@ def execute(
             plant_context = plant.GetMyMutableContextFromRoot(context)
             move_cube(plant, plant_context, cake.scene.cube_body(m.cube), m.x, m.y)
         done, finished, error, warnings = cake.reference.status(context)
-        if progress:
+        if progress and progress.enabled:
             progress.update(t, time.perf_counter() - t0, done, note=cake.reference.note(context))
         if error is not None or finished or t >= max_sim_s:
             break

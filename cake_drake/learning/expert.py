@@ -379,7 +379,7 @@ class ClosedLoopExpert:
         if self._pending_pickups and ("arm-empty",) in canonical:
             cube, self._pending_pickups = self._pending_pickups[0], self._pending_pickups[1:]
             last = (self.roles.action(PICK, cube), self.roles.action(PLACE, cube))
-            return self._forced(self._unpile(cube, canonical) + last, facts)
+            return self._forced(self.roles.unpile(cube, canonical) + last, facts)
         loose = self._loose(canonical, m.cubes)
         if loose and ("arm-empty",) in canonical:
             if not self._repair("re-place", f"{loose[0][1]} stands off {loose[0][2]}", step):
@@ -451,20 +451,7 @@ class ClosedLoopExpert:
         """Actions that set ``fact``'s upper cube down again on the lower."""
         cube, support = fact[1], fact[2]
         last = (self.roles.action(PICK, cube, support), self.roles.action(PLACE, cube, support))
-        return self._unpile(cube, canonical) + last
-
-    def _unpile(self, cube: str, canonical) -> tuple[GroundAction, ...]:
-        """Actions that put the cubes on top of ``cube`` on the table, the top one first."""
-        above = {f[2]: f[1] for f in canonical if f[0] == "on"}
-        chain = []
-        top = cube
-        while top in above:
-            chain.append((above[top], top))
-            top = above[top]
-        actions: list[GroundAction] = []
-        for upper, lower in reversed(chain):
-            actions += [self.roles.action(PICK, upper, lower), self.roles.action(PLACE, upper)]
-        return tuple(actions)
+        return self.roles.unpile(cube, canonical) + last
 
     def _plan_from(self, facts) -> tuple[GroundAction, ...] | None:
         """The planner's plan from ``facts`` to the goal; None (and :attr:`reason`) if none."""

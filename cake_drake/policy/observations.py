@@ -67,7 +67,9 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.math import RigidTransform
 
+from cake_drake.geometric.waypoints import WaypointParams, face_yaw, free_slot, transit_height
 from cake_drake.symbolic import fact_str
+from cake_drake.world.scene import CUBE_SIZE
 
 #: The most cubes an observation describes (the project's largest Blocksworld).
 MAX_CUBES = 12
@@ -180,14 +182,6 @@ def skill_context(action, cubes: Mapping[str, RigidTransform], slots, params=Non
     """The targets of ``action`` (in the exercise's names, see ``SKILL_SCHEMAS``) from the
     world measured as it starts: the classical layer's own (its free slot, the lower
     cube's top, its transit height: :mod:`cake_drake.geometric.waypoints`)."""
-    from cake_drake.geometric.waypoints import (
-        WaypointParams,
-        face_yaw,
-        free_slot,
-        transit_height,
-    )
-    from cake_drake.world.scene import CUBE_SIZE
-
     params = params or WaypointParams()
     name, args = action.name, tuple(action.args)
     if name not in SKILL_SCHEMAS:
@@ -212,8 +206,6 @@ def skill_vector(
     context: SkillContext, cubes: Mapping[str, RigidTransform], X_WG: RigidTransform
 ) -> np.ndarray:
     """``observation.skill`` (see the module's table) from the measured poses now."""
-    from cake_drake.geometric.waypoints import face_yaw
-
     p_G = X_WG.translation()
     hand_yaw = _yaw(X_WG)
     X_cube = cubes[context.cube]
@@ -227,8 +219,6 @@ def skill_vector(
     else:
         target = context.target
         if context.schema == "stack":  # the lower cube as measured now
-            from cake_drake.world.scene import CUBE_SIZE
-
             target = cubes[context.other].translation() + [0.0, 0.0, CUBE_SIZE]
         out[11] = _quarter(context.target_yaw - hand_yaw)
     out[8:11] = target - p_G

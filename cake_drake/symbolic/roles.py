@@ -188,6 +188,20 @@ class BlocksworldRoles:
         support = None if role.support is None else action.args[role.support]
         return GroundRole(action, role.kind, action.args[role.block], support)
 
+    def unpile(self, block: str, canonical) -> tuple[GroundAction, ...]:
+        """This domain's actions that put the blocks on top of ``block`` on the table, the
+        top one first, from the facts ``canonical`` (in the canonical names)."""
+        above = {f[2]: f[1] for f in canonical if f[0] == "on"}
+        chain = []
+        top = block
+        while top in above:
+            chain.append((above[top], top))
+            top = above[top]
+        actions: list[GroundAction] = []
+        for upper, lower in reversed(chain):
+            actions += [self.action(PICK, upper, lower), self.action(PLACE, upper)]
+        return tuple(actions)
+
     def action(self, kind: str, block: str, support: str | None = None) -> GroundAction:
         """This domain's ground action with a meaning: ``action("pick", "b1")`` -> ``(pickup b1)``.
 

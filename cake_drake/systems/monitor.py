@@ -245,14 +245,7 @@ class ExecutionMonitor(LeafSystem):
         """Set a loose goal stack's upper cube down again: it and the cubes above it put on
         the table, then the planner's plan from there."""
         cube, support, offset = loose
-        above = {f[2]: f[1] for f in self._roles.to_canonical(facts) if f[0] == "on"}
-        prefix = []
-        chain, top = [], cube
-        while top in above:
-            chain.append((above[top], top))
-            top = above[top]
-        for upper, lower in reversed(chain):
-            prefix += [self._roles.action(PICK, upper, lower), self._roles.action(PLACE, upper)]
+        prefix = list(self._roles.unpile(cube, self._roles.to_canonical(facts)))
         # Taken off and put on the table; the planner then stacks it again from there (a
         # place straight back onto the cube it came from is no move any plan makes, and a
         # learned skill has never been shown it).
