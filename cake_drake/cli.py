@@ -992,10 +992,10 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     elif checkpoint:  # a trained policy: the learned layer's adapter runs it
         from cake_drake.learning.checkpoint import check_folder
 
-        check_folder(Path(args.policy), spec.control_mode, args.device)
+        check_folder(Path(args.policy), spec.control_mode, args.device, scenario.cameras)
         options = {**spec.options, "path": str(Path(args.policy).resolve()), "device": args.device}
         spec = replace(spec, policy=CHECKPOINT_POLICY, options=options)
-        if "images" in _checkpoint_inputs(Path(args.policy)):
+        if _checkpoint_cameras(Path(args.policy)):
             spec = replace(spec, cameras=spec_from_scenario(scenario).cameras)
     first = scenario.seed if args.seed is None else args.seed
     if not -(2**31) <= first <= 2**31 - 1:
@@ -1038,11 +1038,11 @@ def _is_skill(path: Path) -> bool:
     return is_skill(_config(model_folder(path)))
 
 
-def _checkpoint_inputs(path: Path) -> str:
-    """What a checkpoint reads: its config's input features, as text."""
-    from cake_drake.learning.checkpoint import model_folder
+def _checkpoint_cameras(path: Path) -> dict:
+    """The cameras the checkpoint at ``path`` sees (its config's input features)."""
+    from cake_drake.learning.checkpoint import _config, camera_features, model_folder
 
-    return (model_folder(path) / "config.json").read_text()
+    return camera_features(_config(model_folder(path)))
 
 
 TRAIN_DOC = """Train a policy on a recording with LeRobot's own training loop, offline.
@@ -1050,10 +1050,12 @@ TRAIN_DOC = """Train a policy on a recording with LeRobot's own training loop, o
 DATASET is a folder written by python -m cake_drake.record. With no other flag the
 recipe of the recording's task is used (models/scenarios/learning.yaml: policy, inputs,
 steps, batch size, network size); flags override it. --policy mlp is the project's own
-state policy (a multilayer perceptron predicting joint offsets in chunks, registered with
+policy (a multilayer perceptron predicting joint offsets in chunks, registered with
 LeRobot as the policy type cake_mlp), act and diffusion are LeRobot's ACT and Diffusion
 Policy. --inputs state reads the joints and observation.environment_state (the cubes'
-poses and the goal: trains on a CPU), images the cameras (GPU work), both all of them.
+poses and the goal); images the joints and the cameras (mlp: a small encoder a camera,
+and the goal without the poses; both train on a CPU, ACT's and Diffusion Policy's
+image encoders are GPU work); both all of them (act, diffusion); skill a learned skill.
 Nothing is downloaded: the dataset is read from its folder and backbones start from
 scratch unless --weights names a file. The checkpoint is LeRobot's
 (OUT/checkpoints/last/pretrained_model): evaluate it with python -m cake_drake.evaluate
@@ -1104,7 +1106,13 @@ def train_parser() -> argparse.ArgumentParser:
         help="fit the dynamic layer's residual to run folders written with outputs.logs",
     )  # fmt: skip
     p.add_argument("--policy", help="mlp | act | diffusion (default: the recipe's)")
-    p.add_argument("--inputs", help="state | images | both (default: the recipe's)")
+    p.add_argument("--inputs", help="state | images | both | skill (default: the recipe's)")
+    p.add_argument(
+        "--cameras",
+        nargs="+",
+        metavar="NAME",
+        help="the cameras an image policy reads (default: all the recording's)",
+    )
     p.add_argument("--steps", type=int, help="training steps (default: the recipe's)")
     p.add_argument("--batch-size", type=int, help="batch size (default: the recipe's)")
     p.add_argument("--device", default="auto", help="auto | cpu | cuda (default auto)")
@@ -1123,7 +1131,7 @@ def train_parser() -> argparse.ArgumentParser:
 def main_train(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
-    from cake_drake.learning.train import recipe_of, train
+    from cake_drake.learning.train import for_inputs, recipe_of, train
 
     args = train_parser().parse_args(argv)
     if args.residual:
@@ -1133,13 +1141,15 @@ def main_train(argv: list[str] | None = None) -> int:
                          "(several run folders go with --residual)")  # fmt: skip
     args.dataset = args.dataset[0]
     recipe, report = recipe_of(args.dataset)
+    recipe = for_inputs(recipe, args.inputs)
     given = {
         "policy": args.policy,
-        "inputs": args.inputs,
         "steps": args.steps,
         "batch_size": args.batch_size,
     }
     recipe = replace(recipe, **{k: v for k, v in given.items() if v is not None})
+    if args.cameras:
+        recipe = replace(recipe, images=replace(recipe.images, cameras=list(args.cameras)))
     if args.weights is not None and not Path(args.weights).is_file():
         raise InputError(f"--weights {args.weights}: no such file")
     dagger_only = {
@@ -1167,7 +1177,7 @@ def main_train(argv: list[str] | None = None) -> int:
 def _main_residual(args: argparse.Namespace) -> int:
     from cake_drake.learning.residual import describe, train_residual
 
-    policy_only = ("policy", "inputs", "steps", "batch_size", "weights", "dagger")
+    policy_only = ("policy", "inputs", "cameras", "steps", "batch_size", "weights", "dagger")
     for name in policy_only:
         if getattr(args, name) is not None:
             raise InputError(f"--{name.replace('_', '-')} with --residual: it is a policy's "

@@ -271,7 +271,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
                 f"simulation.max_sim_s = {s.simulation.max_sim_s:g} s"
             )
     elif isinstance(s.reference, Policy):
-        check_policy(s.reference)
+        check_policy(s.reference, s.cameras)
     else:
         resolve(s.reference.action_source, ACTION_SOURCES, "action source")
         resolve(s.motion.ik, SOLVERS, "IK solver")
@@ -295,9 +295,10 @@ def check_skills(motion) -> None:
     _range(motion.skill_max_steps, 0, 1_000_000, "motion.skill_max_steps")
 
 
-def check_policy(ref: Policy) -> None:
+def check_policy(ref: Policy, cameras=()) -> None:
     """A ``!Policy`` reference that can run: a factory that imports, a known action space,
-    a rate and a step budget in range (the policy itself is built with the Diagram)."""
+    a rate and a step budget in range, a checkpoint that sees only ``cameras`` (the
+    policy itself is built with the Diagram)."""
     from cake_drake.policy.spaces import check_space
 
     if ref.checkpoint:
@@ -309,7 +310,7 @@ def check_policy(ref: Policy) -> None:
         # The learned layer's adapter, through the plug-in door (nothing here imports it).
         load_attribute(CHECKPOINT_POLICY, "policy")
         check_folder = load_attribute(CHECKPOINT_CHECK, "policy")
-        check_folder(resolve_path(ref.checkpoint), ref.action_space, ref.device)
+        check_folder(resolve_path(ref.checkpoint), ref.action_space, ref.device, cameras)
     elif not ref.factory:
         raise InputError(
             "reference: !Policy needs a factory (module:attribute, "

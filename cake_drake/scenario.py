@@ -158,12 +158,26 @@ class Policy:
 
 
 @dataclass
+class ImageRecipe:
+    """What a task's recipe changes when the policy sees (``train --inputs images``, or a
+    recipe whose ``inputs`` is ``images``): a camera's encoder costs more a sample than
+    the numbers, so fewer samples a step."""
+
+    steps: int = 8000
+    batch_size: int = 64
+    #: Random shift of each training image, in pixels (0: none).
+    crop_shift: int = 4
+    #: The cameras it reads, by name (none named: every camera the recording has).
+    cameras: list[str] = field(default_factory=list)
+
+
+@dataclass
 class Training:
     """A learning task's recipe for ``python -m cake_drake.train``: LeRobot's policy, what it
     reads, how long it trains and how big its network is (data, not code)."""
 
     policy: str = "act"  # act | diffusion | mlp
-    inputs: str = "state"  # state | images | both
+    inputs: str = "state"  # state | images | both | skill
     steps: int = 20000
     batch_size: int = 64
     lr: float = 1e-4
@@ -180,6 +194,8 @@ class Training:
     n_action_steps: int = 10
     #: Observations the MLP reads at once: the current one and those before it (mlp).
     n_obs_steps: int = 1
+    #: The recipe's changes when the policy reads the cameras instead of the poses.
+    images: ImageRecipe = field(default_factory=ImageRecipe)
 
 
 ReferenceConfig = Planned | Recorded | Policy

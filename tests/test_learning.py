@@ -322,11 +322,12 @@ def test_lerobot_eval_runs_a_checkpoint_on_the_tasks(tmp_path):
 def test_a_dataset_without_the_features_a_policy_needs_is_refused(trained, tmp_path):
     ds = tmp_path / "ds"
     shutil.copytree(trained / "ds", ds)
-    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "images")
-    one_line(r, 2, "--policy mlp reads numbers only (--inputs state or skill), not --inputs images")
-    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "images",
-             "--policy", "act")  # fmt: skip
-    one_line(r, 2, "no camera features, which --inputs images needs")
+    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "both")
+    one_line(r, 2, "--policy mlp sees the cubes (--inputs images) or reads their poses")
+    for policy in ("mlp", "act"):
+        r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--inputs", "images",
+                 "--policy", policy)  # fmt: skip
+        one_line(r, 2, "no camera features, which --inputs images needs")
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--steps", "0")
     one_line(r, 2, "--steps 0: a whole number, 1 to 10000000")
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--batch-size", "4000")

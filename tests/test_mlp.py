@@ -122,5 +122,144 @@ def test_a_configuration_that_cannot_work_is_refused():
     inputs, outputs = features()
     inputs["observation.images.scene"] = PolicyFeature(FeatureType.VISUAL, (3, 96, 96))
     config = CakeMLPConfig(input_features=inputs, output_features=outputs)
-    with pytest.raises(ValueError, match="reads numbers only"):
+    with pytest.raises(ValueError, match="sees the cubes or reads their poses, not both"):
         CakeMLPPolicy(config)
+
+
+# --- a policy that sees ------------------------------------------------------------------
+
+
+def seeing(**kw) -> CakeMLPPolicy:
+    """A cake_mlp that reads the joints, two cameras of different sizes and the goal."""
+    from lerobot.configs.types import FeatureType, PolicyFeature
+
+    inputs = {
+        "observation.state": PolicyFeature(FeatureType.STATE, (8,)),
+        "observation.goal": PolicyFeature(FeatureType.STATE, (156,)),
+        "observation.images.scene": PolicyFeature(FeatureType.VISUAL, (3, 40, 48)),
+        "observation.images.wrist": PolicyFeature(FeatureType.VISUAL, (3, 32, 32)),
+    }
+    outputs = {"action": PolicyFeature(FeatureType.ACTION, (8,))}
+    config = CakeMLPConfig(input_features=inputs, output_features=outputs, device="cpu", **kw)
+    return CakeMLPPolicy(config)
+
+
+def camera_batch(n=3, steps=2, seed=2):
+    g = torch.Generator().manual_seed(seed)
+    return {
+        "observation.state": torch.randn(n, steps, 8, generator=g),
+        "observation.goal": torch.zeros(n, steps, 156),
+        "observation.images.scene": torch.rand(n, steps, 3, 40, 48, generator=g),
+        "observation.images.wrist": torch.rand(n, steps, 3, 32, 32, generator=g),
+        "action": torch.randn(n, 10, 8, generator=g),
+    }
+
+
+def test_a_policy_that_sees_reads_no_pose_and_each_cameras_latest_frame():
+    p = seeing(n_obs_steps=2)
+    assert "observation.environment_state" not in p.config.input_features
+    assert set(p.vision) == {"scene", "wrist"}
+    b = camera_batch()
+    p.eval()
+    chunk = p.predict_action_chunk(b)
+    assert chunk.shape == (3, 10, 8) and torch.isfinite(chunk).all()
+    older = {k: v.clone() for k, v in b.items()}
+    older["observation.images.scene"][:, 0] = 0.0  # the frame before: not read
+    assert torch.equal(p.predict_action_chunk(older), chunk)
+    newer = {k: v.clone() for k, v in b.items()}
+    newer["observation.images.wrist"][:, -1] = 1.0 - newer["observation.images.wrist"][:, -1]
+    assert not torch.allclose(p.predict_action_chunk(newer), chunk)
+    keypoints = p.vision["scene"](torch.rand(2, 3, 40, 48))
+    assert keypoints.shape == (2, 2 * p.config.vision_keypoints)
+    assert keypoints.abs().max() <= 1.0  # expected image coordinates in [-1, 1]
+
+
+def test_augmentation_moves_the_images_and_not_the_labels():
+    from cake_drake.learning.mlp.network import random_shift
+
+    images = torch.rand(16, 3, 20, 24)
+    torch.manual_seed(0)
+    moved = random_shift(images, 3)
+    assert moved.shape == images.shape and not torch.equal(moved, images)
+    assert torch.equal(random_shift(images, 0), images)
+    for k in range(16):  # each image is its own whole-pixel translate, border repeated
+        padded = torch.nn.functional.pad(images[k : k + 1], (3, 3, 3, 3), mode="replicate")[0]
+        assert any(
+            torch.equal(moved[k], padded[:, dy : dy + 20, dx : dx + 24])
+            for dy in range(7)
+            for dx in range(7)
+        )
+    p = seeing(n_obs_steps=2, crop_shift=4)
+    b = camera_batch()
+    labels = b["action"].clone()
+    p.train()
+    torch.manual_seed(1)
+    first = p.forward(b)[0]
+    torch.manual_seed(2)
+    second = p.forward(b)[0]
+    assert not torch.equal(first, second)  # the images were moved, differently each time
+    assert torch.equal(b["action"], labels)  # the labels were not
+    p.eval()
+    assert torch.equal(p.predict_action_chunk(b), p.predict_action_chunk(b))  # not in acting
+
+
+def test_a_policy_that_sees_loads_without_lerobot_as_it_was_trained(tmp_path):
+    from cake_drake.learning.mlp.network import load
+
+    p = seeing(n_obs_steps=2, vision_keypoints=8)
+    p.save_pretrained(tmp_path)
+    network = load(tmp_path)
+    b = camera_batch()
+    p.eval()
+    assert torch.equal(network.predict_action_chunk(b), p.predict_action_chunk(b))
+    now = {k: v[:1, -1] for k, v in b.items() if k.startswith("observation.")}
+    assert torch.equal(network.select_action(now), p.select_action(now))
+
+
+# --- acting without torch ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n_obs_steps", [1, 2])
+def test_numpy_acting_is_the_networks_arithmetic(tmp_path, n_obs_steps):
+    from cake_drake.learning.mlp.acting import NumpyChunks, load
+
+    p = policy(n_obs_steps=n_obs_steps, chunk_size=4, n_action_steps=3)
+    p.save_pretrained(tmp_path)
+    acting = load(tmp_path, "cpu")
+    assert isinstance(acting, NumpyChunks)
+    b = batch(n=5)
+    if n_obs_steps > 1:  # (B, T, D): the history
+        b = {k: torch.stack([v, v.flip(0)], dim=1) for k, v in b.items()}
+    want = p.predict_action_chunk(b).numpy()
+    got = acting.predict_action_chunk({k: v.numpy() for k, v in b.items()})
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
+    p.reset()
+    for k in range(7):  # the queue and the history: the same actions, step after step
+        now = batch(n=1, seed=10 + k)
+        np.testing.assert_allclose(
+            acting.select_action({key: v.numpy() for key, v in now.items()}),
+            p.select_action(now).numpy(),
+            rtol=1e-5,
+            atol=1e-5,
+        )
+
+
+def test_a_run_with_the_shipped_state_policy_imports_no_torch(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    code = (
+        "import sys\n"
+        "from cake_drake.cli import main_run\n"
+        "code = main_run(['--scenario', sys.argv[1], '--name', 'learned_stack2', '--out', "
+        "sys.argv[2], '--quiet'])\n"
+        "print(code, 'torch' in sys.modules)\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code, str(root / "models/scenarios/learning.yaml"),
+         str(tmp_path / "out")],
+        cwd=root, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert r.stdout.split()[-2:] == ["0", "False"], r.stdout + r.stderr

@@ -18,7 +18,9 @@ memory:
   dataset's image transforms;
 - for a learned skill (a policy that reads ``observation.skill``) the episodes are cut
   into per-action segments (where ``ground_action`` changes): its history and chunks stop
-  at its action's bounds, padded as at an episode's.
+  at its action's bounds, padded as at an episode's;
+- a policy that sees reads ``observation.goal``: the goal's numbers of
+  ``observation.environment_state`` without the cubes' poses.
 
 Everything else - the metadata, the sampler's episode bounds, the policy, processors,
 optimiser, scheduler and checkpoints - stays LeRobot's: :func:`fast_batches` swaps the
@@ -40,6 +42,8 @@ INDEX_KEYS = ("timestamp", "frame_index", "episode_index", "index", "task_index"
 SKILL, GROUND = "observation.skill", "ground_action"
 #: The recording's column a learned skill reads as ``observation.skill``.
 SKILL_COLUMN = "skill"
+#: The goal alone (no pose), read by a policy that sees, and where it comes from.
+GOAL, ENV_STATE = "observation.goal", "observation.environment_state"
 
 
 def _segments(index: np.ndarray, episode: np.ndarray, ground: np.ndarray):
@@ -132,7 +136,11 @@ class ColumnDataset(torch.utils.data.Dataset):
         deltas = _reader(base).delta_indices or {}
         self._deltas = {k: np.asarray(v, np.int64) for k, v in deltas.items()}
         if wanted is not None and SKILL in wanted and SKILL_COLUMN in self.columns:
-            self._skill_input(meta)
+            self._derived_input(meta, SKILL, self.columns.pop(SKILL_COLUMN))
+        if wanted is not None and GOAL in wanted and ENV_STATE in self.columns:
+            from cake_drake.policy.observations import GOAL_START
+
+            self._derived_input(meta, GOAL, self.columns[ENV_STATE][:, GOAL_START:])
         self._tasks = [str(name) for name in meta.tasks.index]
         self.frames: dict[str, np.ndarray] = {}
         self._frame_of: dict[str, np.ndarray] = {}
@@ -141,17 +149,18 @@ class ColumnDataset(torch.utils.data.Dataset):
                 continue
             self._load_video(key, episode)
 
-    def _skill_input(self, meta) -> None:
-        """The recording's ``skill`` column handed out as the input ``observation.skill``:
-        an observation's history (``observation.state``'s deltas) and its statistics in
-        the dataset's, which the policy standardises with."""
-        column = self.columns.pop(SKILL_COLUMN)
-        self.columns[SKILL] = column
+    def _derived_input(self, meta, key: str, column: np.ndarray) -> None:
+        """``column`` handed out as the input ``key`` (the recording's ``skill`` as
+        ``observation.skill``, the goal as ``observation.goal``): an observation's history
+        (``observation.state``'s deltas) and its statistics in the dataset's, which the
+        policy standardises with."""
+        column = np.ascontiguousarray(column)
+        self.columns[key] = column
         if "observation.state" in self._deltas:
-            self._deltas[SKILL] = self._deltas["observation.state"]
+            self._deltas[key] = self._deltas["observation.state"]
         stats = getattr(meta, "stats", None)
-        if isinstance(stats, dict) and SKILL not in stats:
-            stats[SKILL] = {
+        if isinstance(stats, dict) and key not in stats:
+            stats[key] = {
                 "mean": column.mean(axis=0), "std": column.std(axis=0),
                 "min": column.min(axis=0), "max": column.max(axis=0),
             }  # fmt: skip

@@ -68,6 +68,15 @@ def action_size(folder: Path) -> int:
         ) from None
 
 
+def check_device(device: str) -> None:
+    """Refuse (one line, exit 2) a device that is none, or ``cuda`` where torch sees no
+    GPU; ``auto`` and ``cpu`` are checked without importing torch."""
+    if device not in ("auto", "cpu", "cuda"):
+        raise InputError(f"device {device!r}; choose one of: auto, cpu, cuda")
+    if device == "cuda":
+        device_for(device)
+
+
 def device_for(device: str) -> str:
     """``auto`` is a CUDA GPU where torch sees one, else the CPU; ``cuda`` without one is
     refused (one line, exit 2)."""
@@ -84,14 +93,44 @@ def device_for(device: str) -> str:
     return "cpu"
 
 
-def check_folder(path: Path, action_space: str, device: str = "auto") -> Path:
+def camera_features(config: dict) -> dict[str, tuple[int, ...]]:
+    """The cameras a checkpoint's policy reads: name -> (channels, height, width)."""
+    prefix = "observation.images."
+    return {
+        key[len(prefix) :]: tuple(int(n) for n in feature.get("shape", ()))
+        for key, feature in (config.get("input_features") or {}).items()
+        if key.startswith(prefix)
+    }
+
+
+def check_cameras(path: Path, config: dict, cameras) -> None:
+    """Refuse a checkpoint that reads cameras the run does not have, or has at other
+    sizes: ``cameras`` are the run's (``name``, ``width``, ``height``)."""
+    have = {c.name: (3, c.height, c.width) for c in cameras}
+    for name, shape in camera_features(config).items():
+        if name not in have:
+            raise InputError(
+                f"{path}: the policy sees camera {name!r}, which the scenario lacks "
+                f"(cameras: {', '.join(have) or 'none'}); give it the cameras it was trained on"
+            )
+        if tuple(shape) != have[name]:
+            raise InputError(
+                f"{path}: the policy saw camera {name!r} at {shape[2]} x {shape[1]}; the "
+                f"scenario's is {have[name][2]} x {have[name][1]}: give it the trained size"
+            )
+
+
+def check_folder(path: Path, action_space: str, device: str = "auto", cameras=None) -> Path:
     """Refuse, before anything is built, a folder that is no checkpoint, one whose action
-    does not fit ``action_space``, or a device that is not here, or a Python or LeRobot
-    that cannot load it; the model's folder."""
+    does not fit ``action_space``, one that sees cameras the run lacks (``cameras``: the
+    run's, when given), or a device that is not here, or a Python or LeRobot that cannot
+    load it; the model's folder."""
     from cake_drake.learning.dataset import require_lerobot
 
     require_lerobot()
     folder = model_folder(path)
+    if cameras is not None:
+        check_cameras(path, _config(folder), cameras)
     if is_skill(_config(folder)):
         raise InputError(
             f"{path}: a learned skill (it reads observation.skill, the ground action it "
@@ -109,7 +148,7 @@ def check_folder(path: Path, action_space: str, device: str = "auto") -> Path:
             f"{path}: the checkpoint predicts {size} numbers an action; {action_space} takes "
             f"{want}" + (f" (it was trained in {fits[0]})" if fits else "")
         )
-    device_for(device)
+    check_device(device)
     return folder
 
 
@@ -122,16 +161,22 @@ class CheckpointPolicy:
         require_lerobot()
         self.path = Path(path)
         self.folder = model_folder(self.path)
-        self.device = device_for(device)
+        check_device(device)
+        self._device = device
         self._policy = None
 
     def _load(self) -> None:
         config = _config(self.folder)
+        numbers_only = config.get("type") == "cake_mlp" and not camera_features(config)
+        # A perceptron over numbers acts on the CPU unless a GPU is asked for by name: at a
+        # batch of one a GPU gains nothing, and finding one means importing torch.
+        self.device = "cpu" if numbers_only and self._device == "auto" else device_for(self._device)
         if config.get("type") == "cake_mlp":
-            # The project's own MLP acts from torch alone: its LeRobot processors are the
+            # The project's own MLP acts without LeRobot: its LeRobot processors are the
             # identity (it standardises itself), and LeRobot's policy factory would import
-            # every policy type (torchvision, diffusers: seconds a process).
-            from cake_drake.learning.mlp.network import load
+            # every policy type (torchvision, diffusers: seconds a process). Reading
+            # numbers only on the CPU, it acts in NumPy: no torch in the process.
+            from cake_drake.learning.mlp.acting import load
 
             self._policy = load(self.folder, self.device)
             self._pre = self._post = None
@@ -158,7 +203,7 @@ class CheckpointPolicy:
 
     def reset(self, task, seed: int) -> None:
         space = getattr(task, "action_space", "joint_position")
-        check_folder(self.path, space, self.device)
+        check_folder(self.path, space, self._device)
         if self._policy is None:
             self._load()
         self._policy.reset()  # a new episode: no actions left from the last one
@@ -166,9 +211,8 @@ class CheckpointPolicy:
             self._pre.reset()
             self._post.reset()
 
-    def batch(self, observation) -> dict:
-        """The policy's inputs from a slot or Gym observation, batched (1, ...)."""
-        import torch
+    def batch(self, observation) -> dict[str, np.ndarray]:
+        """The policy's inputs from a slot or Gym observation, batched (1, ...), float32."""
 
         def get(slot_key, env_key, part=None):
             if slot_key in observation:
@@ -182,24 +226,27 @@ class CheckpointPolicy:
                 value = get(key, "state")[:8]
             elif key == "observation.environment_state":
                 value = get(key, "environment_state")
+            elif key == "observation.goal":  # the goal without the poses
+                from cake_drake.policy.observations import GOAL_START
+
+                value = get("observation.environment_state", "environment_state")[GOAL_START:]
             elif key.startswith("observation.images."):
                 name = key[len("observation.images.") :]
                 image = get(key, "images", name)
                 value = np.ascontiguousarray(image.transpose(2, 0, 1)).astype(np.float32) / 255.0
             else:
                 raise InputError(f"{self.folder}: the policy reads {key}, which no observation has")
-            batch[key] = torch.as_tensor(np.asarray(value, np.float32)).unsqueeze(0)
+            batch[key] = np.asarray(value, np.float32)[None]
         return batch
 
     def act(self, observation) -> np.ndarray:
+        if self._pre is None:  # cake_mlp: NumPy in, NumPy out
+            return self._policy.select_action(self.batch(observation))[0].astype(np.float64)
         import torch
 
         with torch.inference_mode():
-            if self._pre is None:
-                batch = {k: v.to(self.device) for k, v in self.batch(observation).items()}
-                action = self._policy.select_action(batch)
-            else:
-                action = self._post(self._policy.select_action(self._pre(self.batch(observation))))
+            batch = {k: torch.as_tensor(v) for k, v in self.batch(observation).items()}
+            action = self._post(self._policy.select_action(self._pre(batch)))
         return action.squeeze(0).cpu().numpy().astype(np.float64)
 
 

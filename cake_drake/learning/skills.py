@@ -14,7 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
-from cake_drake.learning.checkpoint import _config, device_for, is_skill, model_folder
+from cake_drake.learning.checkpoint import (
+    _config,
+    check_device,
+    device_for,
+    is_skill,
+    model_folder,
+)
 from cake_drake.policy.observations import SKILL_SIZE
 
 #: The action a skill answers in: seven joint targets and the gripper's width.
@@ -50,7 +56,7 @@ def check_folder(path: Path, device: str = "cpu") -> Path:
             f"{path}: the skill predicts {action} numbers an action; a skill answers in "
             f"joint_position ({SKILL_ACTION}: 7 joints and the gripper)"
         )
-    device_for(device)
+    check_device(device)
     return folder
 
 
@@ -59,25 +65,22 @@ class CheckpointSkill:
     ``observation.state`` and ``observation.skill`` -> 8 numbers."""
 
     def __init__(self, path: str, device: str = "cpu") -> None:
-        from cake_drake.learning.mlp.network import load
+        from cake_drake.learning.mlp.acting import load
 
         self.folder = check_folder(Path(path), device)
-        self.device = device_for(device)
+        # A perceptron acts on the CPU unless a GPU is asked for by name (see
+        # cake_drake.learning.checkpoint): then no torch is imported.
+        self.device = "cpu" if device == "auto" else device_for(device)
         self.network = load(self.folder, self.device)
 
     def reset(self) -> None:
         self.network.reset()
 
     def act(self, observation) -> np.ndarray:
-        import torch
-
         batch = {
-            key: torch.as_tensor(np.asarray(observation[key], np.float32)).unsqueeze(0)
-            for key in self.network.input_keys
+            key: np.asarray(observation[key], np.float32)[None] for key in self.network.input_keys
         }
-        with torch.inference_mode():
-            action = self.network.select_action({k: v.to(self.device) for k, v in batch.items()})
-        return action.squeeze(0).cpu().numpy().astype(np.float64)
+        return self.network.select_action(batch)[0].astype(np.float64)
 
 
 def make(path: str, device: str = "cpu") -> CheckpointSkill:

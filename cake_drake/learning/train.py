@@ -16,7 +16,8 @@ fine-tune, with the new dataset's normalisation), as DAgger's rounds do
 
 What a policy reads (``inputs``): ``state`` is ``observation.state`` and
 ``observation.environment_state`` (the cubes' poses and the goal), ``images`` the cameras
-(with ``observation.state``), ``both`` all of them; ``skill`` is ``observation.state`` and
+(with ``observation.state``, and for ``mlp`` ``observation.goal``: the goal's numbers
+without the poses), ``both`` all of them; ``skill`` is ``observation.state`` and
 ``observation.skill`` (the ground action under way: a learned skill, trained on the
 recording cut into per-action segments, which the geometric layer runs under the
 planner).
@@ -29,12 +30,12 @@ import json
 import os
 import sys
 import warnings
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from cake_drake.errors import InputError
 from cake_drake.learning import dataset as datasets
-from cake_drake.scenario import Training
+from cake_drake.scenario import ImageRecipe, Training
 
 #: ``mlp`` is the project's own state policy, registered with LeRobot as ``cake_mlp``
 #: (:mod:`cake_drake.learning.mlp`); the others are LeRobot's.
@@ -56,17 +57,45 @@ def recipe_of(root: Path) -> tuple[Training, dict]:
             report = {}
     fields = report.get("training") or {}
     known = {k: v for k, v in fields.items() if k in Training.__dataclass_fields__}
-    return Training(**known), report
+    images = known.pop("images", None)
+    recipe = Training(**known)
+    if isinstance(images, dict):
+        fields = ImageRecipe.__dataclass_fields__
+        recipe.images = ImageRecipe(**{k: v for k, v in images.items() if k in fields})
+    return recipe, report
+
+
+def for_inputs(recipe: Training, inputs: str | None) -> Training:
+    """The recipe for ``inputs`` (the recipe's own when None): ``images`` takes the
+    recipe's image part (steps, batch size) when the recipe itself reads other inputs."""
+    if inputs is None or inputs == recipe.inputs:
+        return recipe
+    if inputs == "images":
+        part = recipe.images
+        return replace(recipe, inputs=inputs, steps=part.steps, batch_size=part.batch_size)
+    return replace(recipe, inputs=inputs)
 
 
 def _info(root: Path) -> dict:
     return json.loads((Path(root) / "meta" / "info.json").read_text())
 
 
-def input_keys(features: dict, inputs: str, root: Path) -> list[str]:
-    """The dataset's features the policy reads; one line (exit 2) when the dataset lacks
-    what ``inputs`` needs."""
+def input_keys(
+    features: dict, inputs: str, root: Path, policy: str = "mlp", cameras=()
+) -> list[str]:
+    """The dataset's features the policy reads (of its cameras, those named in
+    ``cameras``, or all); one line (exit 2) when the dataset lacks what ``inputs``
+    needs."""
     images = [k for k, f in features.items() if f.get("dtype") in ("video", "image")]
+    if cameras:
+        have = {k.rsplit(".", 1)[-1]: k for k in images}
+        for name in cameras:
+            if name not in have:
+                raise InputError(
+                    f"--cameras {name}: {root} has no such camera; it has "
+                    f"{', '.join(have) or 'none'}"
+                )
+        images = [have[name] for name in cameras]
     keys = []
     if "observation.state" in features:
         keys.append("observation.state")
@@ -91,6 +120,9 @@ def input_keys(features: dict, inputs: str, root: Path) -> list[str]:
                 "cameras, or train with --inputs state"
             )
         keys += images
+        # The goal without the poses: what a policy that sees cannot read off its cameras.
+        if inputs == "images" and policy == "mlp" and "observation.environment_state" in features:
+            keys.append("observation.goal")
     return keys
 
 
@@ -120,10 +152,15 @@ def check(
         value = getattr(recipe, name)
         if not (isinstance(value, int) and lo <= value <= hi):
             raise InputError(f"--{name.replace('_', '-')} {value!r}: a whole number, {lo} to {hi}")
-    if recipe.policy == "mlp" and recipe.inputs not in ("state", "skill"):
+    if recipe.policy == "mlp" and recipe.inputs == "both":
         raise InputError(
-            f"--policy mlp reads numbers only (--inputs state or skill), "
-            f"not --inputs {recipe.inputs}"
+            "--policy mlp sees the cubes (--inputs images) or reads their poses (--inputs "
+            "state), not both"
+        )
+    if recipe.images.cameras and recipe.inputs not in ("images", "both"):
+        raise InputError(
+            f"--cameras {' '.join(recipe.images.cameras)} with --inputs {recipe.inputs}: "
+            "the cameras are read with --inputs images or both"
         )
     if recipe.inputs == "skill" and recipe.policy != "mlp":
         raise InputError(
@@ -135,7 +172,7 @@ def check(
             f"({recipe.chunk_size})"
         )
     info = _info(root)
-    keys = input_keys(info["features"], recipe.inputs, root)
+    keys = input_keys(info["features"], recipe.inputs, root, recipe.policy, recipe.images.cameras)
     frames = info.get("total_frames", 0)
     if isinstance(frames, int) and recipe.batch_size > frames:
         raise InputError(f"--batch-size {recipe.batch_size}: larger than {root}'s {frames} "
@@ -178,6 +215,7 @@ def _policy_config(recipe: Training, device: str, weights: str | None):
             push_to_hub=False,
             hidden_dims=list(recipe.hidden_dims),
             n_obs_steps=recipe.n_obs_steps,
+            crop_shift=recipe.images.crop_shift,
             chunk_size=recipe.chunk_size,
             n_action_steps=recipe.n_action_steps,
             optimizer_lr=recipe.lr,
@@ -258,11 +296,16 @@ def train(
     else:
         meta = LeRobotDatasetMetadata(repo_id, root=root)
         features = dataset_to_policy_features(meta.features)
-        if "skill" in meta.features:  # read as observation.skill (learning.batches)
-            from lerobot.configs.types import FeatureType, PolicyFeature
+        from lerobot.configs.types import FeatureType, PolicyFeature
 
+        if "skill" in meta.features:  # read as observation.skill (learning.batches)
             shape = tuple(meta.features["skill"]["shape"])
             features["observation.skill"] = PolicyFeature(type=FeatureType.STATE, shape=shape)
+        if "observation.goal" in keys:  # the goal's part of the environment state
+            from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, GOAL_START
+
+            shape = (ENVIRONMENT_STATE_SIZE - GOAL_START,)
+            features["observation.goal"] = PolicyFeature(type=FeatureType.STATE, shape=shape)
         policy = _policy_config(recipe, where, weights)
         if pretrained is not None:
             policy.pretrained_path = Path(pretrained)

@@ -76,6 +76,8 @@ MAX_CUBES = 12
 #: Columns of a cube's goal row: the 12 cubes, then the table.
 GOAL_COLUMNS = MAX_CUBES + 1
 ENVIRONMENT_STATE_SIZE = MAX_CUBES * 7 + MAX_CUBES * GOAL_COLUMNS
+#: Where the goal's numbers start in ``observation.environment_state`` (the poses before).
+GOAL_START = MAX_CUBES * 7
 
 
 #: The ground actions a skill executes, by what they do (the exercise's names).

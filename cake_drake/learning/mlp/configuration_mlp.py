@@ -19,6 +19,12 @@ class CakeMLPConfig(PreTrainedConfig):
     to a chunk of ``chunk_size`` actions, of which ``n_action_steps`` are executed before
     it is asked again.
 
+    A policy that sees reads ``observation.state`` and cameras (``observation.images.*``)
+    instead of the cubes' poses, and ``observation.goal`` (the goal as numbers, no pose):
+    each camera's latest frame goes through an encoder of its own (four 3x3 convolutions
+    of ``vision_channels`` and a spatial softmax of ``vision_keypoints`` keypoints), moved
+    by up to ``crop_shift`` pixels at random in training.
+
     With ``relative_joints`` the arm's seven joint targets are learned as offsets from the
     measured joints (the gripper's width as itself): the network says where to move from
     here, which generalises over where the cubes stand better than absolute targets. The
@@ -39,6 +45,11 @@ class CakeMLPConfig(PreTrainedConfig):
     min_std: float = 0.01
     #: Gaussian noise (in standard deviations) added to the standardised inputs in training.
     input_noise: float = 0.0
+    #: A camera's encoder: channels of its convolutions, keypoints out (two numbers each).
+    vision_channels: int = 32
+    vision_keypoints: int = 32
+    #: Random shift of each training image, in pixels (0: none).
+    crop_shift: int = 4
     normalization_mapping: dict[str, NormalizationMode] = field(
         default_factory=lambda: {
             "VISUAL": NormalizationMode.IDENTITY,
@@ -74,13 +85,19 @@ class CakeMLPConfig(PreTrainedConfig):
         )
 
     def validate_features(self) -> None:
-        if self.image_features:
-            raise ValueError("cake_mlp reads numbers only: train it with --inputs state or skill")
         extra = ("observation.environment_state", "observation.skill")
-        if not self.robot_state_feature or not any(k in self.input_features for k in extra):
+        if not self.robot_state_feature or not (
+            self.image_features or any(k in self.input_features for k in extra)
+        ):
             raise ValueError(
                 "cake_mlp needs observation.state and observation.environment_state (a "
-                "whole-task policy) or observation.skill (a learned skill)"
+                "whole-task policy), observation.skill (a learned skill) or cameras (a "
+                "policy that sees)"
+            )
+        if self.image_features and "observation.environment_state" in self.input_features:
+            raise ValueError(
+                "cake_mlp sees the cubes or reads their poses, not both: drop "
+                "observation.environment_state or the cameras"
             )
 
     @property

@@ -1,7 +1,8 @@
-"""The ``cake_mlp`` policy: a multilayer perceptron over the state that predicts a chunk of
-joint-position actions (see :class:`CakeMLPConfig`). The arithmetic lives in
-:mod:`cake_drake.learning.mlp.network` (torch alone); this is LeRobot's face of it: a
-``PreTrainedPolicy`` with the training loss."""
+"""The ``cake_mlp`` policy: a multilayer perceptron over the state (and, for a policy that
+sees, each camera's keypoints) that predicts a chunk of joint-position actions (see
+:class:`CakeMLPConfig`). The arithmetic lives in :mod:`cake_drake.learning.mlp.network`
+(torch alone); this is LeRobot's face of it: a ``PreTrainedPolicy`` with the training
+loss."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from lerobot.utils.constants import ACTION
 from torch import Tensor
 
 from cake_drake.learning.mlp.configuration_mlp import CakeMLPConfig
-from cake_drake.learning.mlp.network import Chunks, input_sizes
+from cake_drake.learning.mlp.features import camera_shapes, input_sizes
+from cake_drake.learning.mlp.network import Chunks
 
 
 class CakeMLPPolicy(Chunks, PreTrainedPolicy):
@@ -22,8 +24,10 @@ class CakeMLPPolicy(Chunks, PreTrainedPolicy):
     def __init__(self, config: CakeMLPConfig, dataset_stats: dict | None = None, **kwargs):
         PreTrainedPolicy.__init__(self, config)
         config.validate_features()
-        inputs = input_sizes(config.input_features)
-        self.build(config, inputs, config.action_feature.shape[0], dataset_stats)
+        features = config.input_features
+        cameras = camera_shapes(features)
+        action = config.action_feature.shape[0]
+        self.build(config, input_sizes(features), action, dataset_stats, cameras)
 
     def get_optim_params(self) -> dict:
         return self.parameters()

@@ -3,7 +3,9 @@
 :class:`Chunks` holds the policy's arithmetic: standardised inputs over the last
 ``n_obs_steps`` observations, a chunk of ``chunk_size`` actions out (the arm's joints as
 offsets from the measured ones), ``n_action_steps`` of them served before the next
-chunk. LeRobot's wrapper (:class:`cake_drake.learning.mlp.modeling_mlp.CakeMLPPolicy`)
+chunk. A policy that sees reads each camera's latest frame through a small encoder of
+its own (:class:`Vision`), whose keypoints join the numbers the perceptron reads.
+LeRobot's wrapper (:class:`cake_drake.learning.mlp.modeling_mlp.CakeMLPPolicy`)
 trains it through LeRobot's loop; :func:`load` builds the same network from a checkpoint
 folder (its ``config.json`` and ``model.safetensors``, the same weights under the same
 names) for a run or an evaluation to act with, without importing LeRobot's policies
@@ -20,28 +22,59 @@ from types import SimpleNamespace
 import torch
 from torch import Tensor, nn
 
-#: The arm's joints in a joint_position action (the gripper's width follows).
-ARM = 7
-OBS_STATE = "observation.state"
-OBS_ENV_STATE = "observation.environment_state"
-OBS_SKILL = "observation.skill"
-ACTION = "action"
-#: The inputs it reads besides ``observation.state``, and their buffers' names: the
-#: whole-task policy reads the cubes and the goal, a learned skill its ground action.
-EXTRA_INPUTS = {OBS_ENV_STATE: "env", OBS_SKILL: "skill"}
+from cake_drake.learning.mlp.features import (
+    ACTION,
+    ARM,
+    EXTRA_INPUTS,
+    OBS_IMAGES,
+    OBS_STATE,
+    camera_shapes,
+    input_sizes,
+)
 
 
-def input_sizes(features: dict) -> dict[str, int]:
-    """The inputs a ``cake_mlp`` reads, in the order it reads them, and their sizes, from a
-    config's ``input_features`` (LeRobot's objects or a config.json's dicts)."""
+def random_shift(images: Tensor, pad: int) -> Tensor:
+    """Each image of the batch (B, C, H, W) moved by its own whole number of pixels, up to
+    ``pad`` in x and in y, its border repeated: the augmentation image policies need
+    (a cube seen one pixel off is the same cube). The labels are not touched."""
+    if pad <= 0:
+        return images
+    b, c, h, w = images.shape
+    padded = nn.functional.pad(images, (pad, pad, pad, pad), mode="replicate")
+    dy = torch.randint(0, 2 * pad + 1, (b, 1), device=images.device)
+    dx = torch.randint(0, 2 * pad + 1, (b, 1), device=images.device)
+    rows = (torch.arange(h, device=images.device) + dy)[:, None, :, None]
+    cols = (torch.arange(w, device=images.device) + dx)[:, None, None, :]
+    batch = torch.arange(b, device=images.device)[:, None, None, None]
+    channel = torch.arange(c, device=images.device)[None, :, None, None]
+    return padded[batch, channel, rows, cols]
 
-    def size(feature) -> int:
-        shape = feature["shape"] if isinstance(feature, dict) else feature.shape
-        return int(shape[0])
 
-    sizes = {OBS_STATE: size(features[OBS_STATE])} if OBS_STATE in features else {}
-    sizes.update({k: size(features[k]) for k in EXTRA_INPUTS if k in features})
-    return sizes
+class Vision(nn.Module):
+    """One camera's encoder: four 3x3 convolutions (strides 2, 2, 1, 1), then a spatial
+    softmax: for each of ``keypoints`` feature maps, where in the image it is most active,
+    as an expected (x, y) in [-1, 1]. Keypoints say where the cubes and the fingers are,
+    which is what a policy that places a cube needs; ``2 * keypoints`` numbers out."""
+
+    def __init__(self, channels: int, keypoints: int, height: int, width: int) -> None:
+        super().__init__()
+        layers: list[nn.Module] = []
+        width_in = 3
+        for stride in (2, 2, 1, 1):
+            layers += [nn.Conv2d(width_in, channels, 3, stride=stride), nn.ReLU()]
+            width_in = channels
+        layers.append(nn.Conv2d(channels, keypoints, 1))
+        self.convs = nn.Sequential(*layers)
+        with torch.no_grad():
+            h, w = self.convs(torch.zeros(1, 3, height, width)).shape[-2:]
+        ys, xs = torch.meshgrid(torch.linspace(-1, 1, h), torch.linspace(-1, 1, w), indexing="ij")
+        grid = torch.stack([xs.flatten(), ys.flatten()], -1)
+        self.register_buffer("grid", grid, persistent=False)
+
+    def forward(self, images: Tensor) -> Tensor:
+        maps = self.convs(images).flatten(2)  # (B, K, h*w)
+        attention = torch.softmax(maps, dim=-1)
+        return (attention @ self.grid).flatten(1)  # (B, 2K): x, y of each keypoint
 
 
 def _stats(stats: dict | None, key: str, size: int, floor: float) -> tuple[Tensor, Tensor]:
@@ -58,16 +91,20 @@ class Chunks:
     """The policy's arithmetic, mixed into an ``nn.Module`` with a ``config`` (the fields
     of :class:`cake_drake.learning.mlp.CakeMLPConfig`)."""
 
-    def build(self, config, inputs: dict[str, int], action_dim: int, stats=None) -> None:
+    def build(
+        self, config, inputs: dict[str, int], action_dim: int, stats=None, cameras=None
+    ) -> None:
         """The statistics (buffers, saved with the weights) and the layers, for ``inputs``
         (:func:`input_sizes`: ``observation.state`` and one or more of
-        :data:`EXTRA_INPUTS`)."""
+        :data:`EXTRA_INPUTS`) and ``cameras`` (:func:`camera_shapes`)."""
         self.config = config
         self.action_dim = action_dim
-        if OBS_STATE not in inputs or len(inputs) < 2:
+        cameras = dict(cameras or {})
+        if OBS_STATE not in inputs or len(inputs) + len(cameras) < 2:
             raise ValueError(
                 "cake_mlp reads observation.state and "
-                + " or ".join(EXTRA_INPUTS) + f"; the features are {', '.join(inputs) or 'none'}"
+                + " or ".join([*EXTRA_INPUTS, "cameras"])
+                + f"; the features are {', '.join([*inputs, *cameras]) or 'none'}"
             )  # fmt: skip
         if config.relative_joints and (action_dim < ARM or inputs[OBS_STATE] < ARM):
             raise ValueError("relative_joints needs 7 arm joints in the state and the action")
@@ -78,8 +115,19 @@ class Chunks:
             self.register_buffer(f"{names[key]}_mean", mean)
             self.register_buffer(f"{names[key]}_std", std)
         self._buffers_of = {key: names[key] for key in inputs}
+        self.cameras = tuple(cameras)
+        self.vision = nn.ModuleDict()
+        for key, (channels, height, width) in cameras.items():
+            name = key[len(OBS_IMAGES) :]
+            mean, std = _stats(stats, key, channels, 1e-3)
+            self.register_buffer(f"image_{name}_mean", mean.reshape(channels, 1, 1))
+            self.register_buffer(f"image_{name}_std", std.reshape(channels, 1, 1))
+            self.vision[name] = Vision(
+                config.vision_channels, config.vision_keypoints, height, width
+            )
         layers: list[nn.Module] = []
         width = sum(inputs.values()) * config.n_obs_steps
+        width += 2 * config.vision_keypoints * len(cameras)
         for hidden in config.hidden_dims:
             layers += [nn.Linear(width, hidden), nn.GELU()]
             if config.dropout:
@@ -105,7 +153,20 @@ class Chunks:
             x = x.flatten(1)
         if self.training and self.config.input_noise:
             x = x + self.config.input_noise * torch.randn_like(x)
-        return x
+        if not self.cameras:
+            return x
+        seen = [x]
+        for key in self.cameras:
+            name = key[len(OBS_IMAGES) :]
+            images = batch[key]
+            if images.dim() == 5:  # (B, n_obs_steps, C, H, W): the latest frame is read
+                images = images[:, -1]
+            mean, std = getattr(self, f"image_{name}_mean"), getattr(self, f"image_{name}_std")
+            images = (images - mean) / std
+            if self.training:
+                images = random_shift(images, self.config.crop_shift)
+            seen.append(self.vision[name](images))
+        return torch.cat(seen, dim=-1)
 
     def _origin(self, batch: dict[str, Tensor]) -> Tensor:
         """What the network's standardised output is measured from: the measured joints
@@ -132,7 +193,7 @@ class Chunks:
         observation is kept for the next chunk's history (the first repeated before it, as
         LeRobot pads an episode's start)."""
         self.eval()
-        now = {k: batch[k] for k in self.input_keys}
+        now = {k: batch[k] for k in (*self.input_keys, *self.cameras)}
         while len(self._seen) < self.config.n_obs_steps - 1:
             self._seen.append(now)
         self._seen.append(now)
@@ -146,9 +207,9 @@ class Chunks:
 class CakeMLPNetwork(Chunks, nn.Module):
     """The network alone, built from a checkpoint's configuration (:func:`load`)."""
 
-    def __init__(self, config, inputs: dict[str, int], action_dim: int) -> None:
+    def __init__(self, config, inputs: dict[str, int], action_dim: int, cameras=None) -> None:
         nn.Module.__init__(self)
-        self.build(config, inputs, action_dim)
+        self.build(config, inputs, action_dim, cameras=cameras)
 
 
 def load(folder: Path, device: str = "cpu") -> CakeMLPNetwork:
@@ -161,10 +222,12 @@ def load(folder: Path, device: str = "cpu") -> CakeMLPNetwork:
         k: data.get(k, default) for k, default in (
             ("n_obs_steps", 1), ("chunk_size", 10), ("n_action_steps", 5),
             ("hidden_dims", [512, 512, 512]), ("dropout", 0.0), ("relative_joints", True),
-            ("min_std", 0.01), ("input_noise", 0.0),
+            ("min_std", 0.01), ("input_noise", 0.0), ("vision_channels", 32),
+            ("vision_keypoints", 32), ("crop_shift", 4),
         )
     })  # fmt: skip
     inputs, outputs = data["input_features"], data["output_features"]
-    network = CakeMLPNetwork(config, input_sizes(inputs), int(outputs[ACTION]["shape"][0]))
+    action = int(outputs[ACTION]["shape"][0])
+    network = CakeMLPNetwork(config, input_sizes(inputs), action, camera_shapes(inputs))
     network.load_state_dict(load_file(str(folder / "model.safetensors")), strict=True)
     return network.to(device).eval()
