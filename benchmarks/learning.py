@@ -26,6 +26,14 @@ Prints each row's frames and its success on the held-out seeds with the interval
 
     python benchmarks/learning.py --compare --tasks tower5 blocks3 --policies act
 
+``--pixels N``: a policy that sees. ``record`` N demonstrations of each task with its
+two cameras, then train on that one recording the state recipe and the image recipe
+(``--inputs images``: the joints, the cameras and the goal, no cube pose) with both
+cameras, the scene camera alone and the wrist camera alone, and evaluate each on the same
+held-out seeds. Prints the training's minutes, steps/s and peak memory per row.
+
+    python benchmarks/learning.py --pixels 300 --tasks stack2 tower3
+
 ``--skills N``: learned skills under the planner. ``record`` N demonstrations of the
 ``skills`` task (generated five-cube problems), ``train`` its recipe (``--inputs skill``),
 then ``evaluate`` the skills in place of each task's demonstrator (the planner's plan, the
@@ -59,16 +67,30 @@ LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 RANDOM = "examples.random_policy:make"
 
 
-def cake(command: str, *args: str) -> float:
-    """Run ``python -m cake_drake.COMMAND ARGS`` (stopping at a failure); its wall time (s)."""
+#: Runs one command; prints its peak memory (the largest of its processes), in MiB.
+PEAK = """
+import resource, subprocess, sys
+code = subprocess.run(sys.argv[1:]).returncode
+print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024, file=sys.stderr)
+sys.exit(code)
+"""
+
+
+def cake(command: str, *args: str, peak: dict | None = None) -> float:
+    """Run ``python -m cake_drake.COMMAND ARGS`` (stopping at a failure); its wall time (s).
+    With ``peak``, its peak memory (MiB) goes to ``peak["peak_mib"]``."""
     t0 = time.perf_counter()
+    cmd = [sys.executable, "-m", f"cake_drake.{command}", *args]
+    if peak is not None:
+        cmd = [sys.executable, "-c", PEAK, *cmd]
     r = subprocess.run(
-        [sys.executable, "-m", f"cake_drake.{command}", *args],
-        cwd=ROOT, capture_output=True, text=True,
+        cmd, cwd=ROOT, capture_output=True, text=True,
         env={**os.environ, "PYTHONPATH": str(ROOT)},
     )  # fmt: skip
     if r.returncode != 0:
         sys.exit(f"python -m cake_drake.{command} {' '.join(args)} failed:\n{r.stderr[-2000:]}")
+    if peak is not None:
+        peak["peak_mib"] = float(r.stderr.strip().splitlines()[-1])
     return time.perf_counter() - t0
 
 
@@ -132,13 +154,41 @@ def first_frames(pool: Path, frames: int, out: Path) -> dict:
 
 
 def train_once(data: Path, run: Path, policy: str, *flags: str) -> dict:
-    """``train`` (made if absent); its wall time and the train.json it wrote."""
+    """``train`` (made if absent); its wall time, peak memory and the train.json it wrote."""
     figures = run / "figures.json"
     if not figures.is_file():
+        peak: dict = {}
         wall = cake("train", str(data), "--out", str(run), "--policy", policy, "--device",
-                    "cpu", *flags)  # fmt: skip
-        figures.write_text(json.dumps({"train_s": wall}))
-    return {**json.loads(figures.read_text()), **json.loads((run / "train.json").read_text())}
+                    "cpu", *flags, peak=peak)  # fmt: skip
+        figures.write_text(json.dumps({"train_s": wall, **peak}))
+    made = {**json.loads(figures.read_text()), **json.loads((run / "train.json").read_text())}
+    return {**made, "steps": made["recipe"]["steps"]}
+
+
+def pixels(args) -> None:
+    """A policy that sees, beside the state policy, from one recording with cameras."""
+    rows = [
+        ("mlp, state (poses)", "state", ["--inputs", "state"]),
+        ("mlp, both cameras", "images", ["--inputs", "images"]),
+        ("mlp, scene camera", "scene", ["--inputs", "images", "--cameras", "scene"]),
+        ("mlp, wrist camera", "wrist", ["--inputs", "images", "--cameras", "wrist"]),
+    ]
+    for demos in args.pixels:
+        for task in args.tasks:
+            data = args.work / f"{task}_demos{demos}_cameras"
+            if not (data / "meta" / "info.json").is_file():
+                seconds = cake("record", str(LEARNING), "--name", task, "--out", str(data),
+                               "--episodes", str(demos))  # fmt: skip
+                print(f"recorded {demos} {task} demonstrations with cameras in "
+                      f"{seconds / 60:.1f} min", flush=True)  # fmt: skip
+            print(f"{task}, {demos} demonstrations with the task's cameras")
+            for label, tag, flags in rows:
+                run = args.work / f"{task}_pixels{demos}_{tag}"
+                made = train_once(data, run, "mlp", *flags)
+                s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
+                batch = made["recipe"]["batch_size"]
+                print(f"{row(label, s, made)}  batch {batch}, peak {made['peak_mib']:.0f} MiB",
+                      flush=True)  # fmt: skip
 
 
 def compare(task: str, policy: str, args) -> None:
@@ -263,12 +313,23 @@ def main() -> None:
         help="learned skills under the planner from DEMOS demonstrations",
     )
     p.add_argument("--sizes", type=int, nargs="*", default=[], help="generated sizes (--skills)")
+    p.add_argument(
+        "--pixels",
+        type=int,
+        nargs="*",
+        default=[],
+        metavar="DEMOS",
+        help="a policy that sees, from DEMOS demonstrations with cameras",
+    )
     args = p.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     print(machine())
     print(f"held-out seeds {args.eval_seed}..{args.eval_seed + args.episodes - 1}")
     if args.skills:
         skills(args)
+        return
+    if args.pixels:
+        pixels(args)
         return
     if args.compare:
         print(f"  {'method':<14} {'labelled':>13}  {'success':>7} {'rate':>5}  "

@@ -3,8 +3,11 @@ then the same runs side by side with the two peers.
 
     python benchmarks/run.py [--repeats N] [--problem P] [--rounds R] [--peers DIR] [--busy]
 
-Each run is a fresh process (interpreter start and imports included) writing every
-output (plan, trajectory, final-state picture, joint-4 plot, summary). Medians over
+Where LeRobot is installed, the learned layers' shipped runs follow (learning.yaml's
+``learned_stack2``: the state policy in the slot; ``learned_tower5``: learned skills
+under the planner), measured the same way. Each run is a fresh process (interpreter
+start and imports included) writing every output (plan, trajectory, final-state
+picture, joint-4 plot, summary). Medians over
 the repeats; the stage times come from each run's summary.json; CPU is user + system
 time of the run and its helpers, peak memory the largest single process of the run.
 
@@ -21,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib.util
 import json
 import os
 import signal
@@ -48,11 +52,14 @@ sys.exit(code)
 """
 
 STAGES = ["import", "planning", "diagram_build", "simulation", "ik", "outputs"]
+LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
+#: The shipped learned runs measured beside the classical ones (their scenarios' names).
+LEARNED = ("learned_stack2", "learned_tower5")
 
 
-def one_run(mode: str, problem: str | None, extra: list[str]) -> dict:
+def one_run(run_args: list[str], problem: str | None, extra: list[str]) -> dict:
     with tempfile.TemporaryDirectory() as out:
-        cmd = [sys.executable, "-m", "cake_drake.run", "--mode", mode, "--out", out, "--quiet"]
+        cmd = [sys.executable, "-m", "cake_drake.run", *run_args, "--out", out, "--quiet"]
         if problem:
             cmd += ["--problem", problem]
         r = subprocess.run(
@@ -116,7 +123,12 @@ def measure(args) -> None:
     print(" | ".join(head))
     print(" | ".join("---" for _ in head))
     replay = None
-    for mode, extra in [("position", []), ("torque", []), ("torque replay", None)]:
+    rows = [("position", []), ("torque", []), ("torque replay", None)]
+    if importlib.util.find_spec("lerobot") is not None and not args.problem:
+        # The learned layers' shipped runs (the lerobot extra): a state policy in the slot,
+        # the learned skills under the planner.
+        rows += [(name, []) for name in LEARNED]
+    for mode, extra in rows:
         if extra is None:  # replay the position run's trajectory, as exercise 4.x.3 does
             replay = tempfile.mkdtemp()
             subprocess.run(
@@ -135,7 +147,10 @@ def measure(args) -> None:
                 capture_output=True,
             )
             extra = ["--reference", str(Path(replay) / "trajectory.npz")]
-        runs = [one_run(mode.split()[0], args.problem, extra) for _ in range(args.repeats)]
+        run_args = ["--mode", mode.split()[0]]
+        if mode in LEARNED:
+            run_args = ["--scenario", str(LEARNING), "--name", mode]
+        runs = [one_run(run_args, args.problem, extra) for _ in range(args.repeats)]
 
         def med(f, runs=runs):
             return statistics.median(f(r) for r in runs)

@@ -333,6 +333,10 @@ def test_a_dataset_without_the_features_a_policy_needs_is_refused(trained, tmp_p
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--batch-size", "4000")
     one_line(r, 2, "--batch-size 4000: larger than")
     info = json.loads((ds / "meta" / "info.json").read_text())
+    (ds / "meta" / "info.json").write_text(json.dumps({**info, "total_frames": 10**10}))
+    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--batch-size", "4")
+    one_line(r, 2, "10000000000 frames holds")
+    assert "GiB are available; train on a recording of fewer episodes" in r.stderr
     del info["features"]["observation.environment_state"]
     (ds / "meta" / "info.json").write_text(json.dumps(info))
     r = cake("train", str(ds), "--out", str(tmp_path / "o"))

@@ -68,8 +68,17 @@ def decode_all(path: Path) -> np.ndarray:
     with av.open(str(path)) as container:
         stream = container.streams.video[0]
         stream.thread_type = "AUTO"
-        frames = [f.to_ndarray(format="rgb24") for f in container.decode(stream)]
-    return np.stack(frames) if frames else np.zeros((0, 0, 0, 3), np.uint8)
+        # Into one array sized from the stream's frame count (no second copy), grown only
+        # where a container does not say how many frames it holds.
+        size = (stream.codec_context.height, stream.codec_context.width, 3)
+        out = np.empty((max(int(stream.frames or 0), 0), *size), np.uint8)
+        n = 0
+        for frame in container.decode(stream):
+            if n == len(out):
+                out = np.concatenate([out, np.empty((max(64, n), *size), np.uint8)])
+            out[n] = frame.to_ndarray(format="rgb24")
+            n += 1
+    return out[:n] if n < len(out) else out
 
 
 def _arrow_table(hf_dataset):

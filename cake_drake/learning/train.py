@@ -33,6 +33,8 @@ import warnings
 from dataclasses import asdict, replace
 from pathlib import Path
 
+import numpy as np
+
 from cake_drake.errors import InputError
 from cake_drake.learning import dataset as datasets
 from cake_drake.scenario import ImageRecipe, Training
@@ -126,6 +128,46 @@ def input_keys(
     return keys
 
 
+def in_memory_bytes(info: dict, keys: list[str]) -> int:
+    """What the data path holds for ``keys`` (:mod:`cake_drake.learning.batches`): every
+    numeric column, and each camera read, every frame as uint8."""
+    frames = int(info.get("total_frames", 0))
+    total = 0
+    for key, feature in info["features"].items():
+        size = int(np.prod(feature.get("shape") or [1]))
+        if feature.get("dtype") in ("video", "image"):
+            total += frames * size if key in keys else 0
+        elif feature.get("dtype") not in ("string", "language"):
+            total += frames * size * np.dtype(feature.get("dtype", "float32")).itemsize
+    return total
+
+
+def _available_bytes() -> int | None:
+    """The memory this machine has available now (Linux's MemAvailable), or None."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        return None
+    return None
+
+
+def _check_memory(root: Path, info: dict, keys: list[str]) -> None:
+    """Refuse, before anything is read, a recording whose columns and frames would not fit
+    in the memory available (with a quarter kept for the network and the process)."""
+    need, have = in_memory_bytes(info, keys), _available_bytes()
+    if have is not None and need > 0.75 * have:
+        cameras = [k for k in keys if k.startswith("observation.images.")]
+        fewer = "fewer cameras (--cameras NAME) or " if len(cameras) > 1 else ""
+        raise InputError(
+            f"{root}: training on its {info.get('total_frames')} frames holds "
+            f"{need / 2**30:.1f} GiB in memory ({len(cameras)} camera(s) read) and "
+            f"{have / 2**30:.1f} GiB are available; train on {fewer}a recording of "
+            "fewer episodes"
+        )
+
+
 def check(
     root: Path,
     out: Path,
@@ -177,6 +219,7 @@ def check(
     if isinstance(frames, int) and recipe.batch_size > frames:
         raise InputError(f"--batch-size {recipe.batch_size}: larger than {root}'s {frames} "
                          "frames; at most the frames the recording holds")  # fmt: skip
+    _check_memory(root, info, keys)
     last = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
     if resume and not last.is_file():
         raise InputError(f"{out}: no checkpoint to resume (no {last.relative_to(out)})")
