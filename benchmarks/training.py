@@ -14,6 +14,11 @@ recipe (``models/scenarios/learning.yaml``; ``--steps`` overrides its length), p
   checkpoint and all) against the network alone's time for the same steps.
 
     python benchmarks/training.py --task stack2 --demos 100
+
+``--inputs images`` measures the recipe of a policy that sees (the cameras decoded once,
+gathered as uint8 and handed out as floats):
+
+    python benchmarks/training.py --task stack2 --demos 100 --inputs images --steps 1000
 """
 
 from __future__ import annotations
@@ -103,6 +108,7 @@ def main() -> None:
     p.add_argument("--dataset", type=Path, help="a recording instead of --task/--demos")
     p.add_argument("--no-cameras", dest="cameras", action="store_false")
     p.add_argument("--steps", type=int, help="training steps (default: the recipe's)")
+    p.add_argument("--inputs", help="state | images (default: the recipe's)")
     p.add_argument("--work", type=Path, default=ROOT / "outputs" / "training_benchmark")
     args = p.parse_args()
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -114,7 +120,7 @@ def main() -> None:
 
     print(machine())
     data = recording(args)
-    recipe = load_scenario(LEARNING, args.task).training
+    recipe = training.for_inputs(load_scenario(LEARNING, args.task).training, args.inputs)
     steps = args.steps or recipe.steps
     keys = training.check(data, Path(tempfile.mkdtemp()) / "x", recipe, "cpu", False)
     import cake_drake.learning.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
@@ -151,7 +157,8 @@ def main() -> None:
         walls = {}
         for n in (short, steps):
             out = Path(tmp) / f"s{n}"
-            walls[n] = cake("cake_drake.train", str(data), "--out", str(out), "--steps", str(n))
+            walls[n] = cake("cake_drake.train", str(data), "--out", str(out), "--steps", str(n),
+                            "--inputs", recipe.inputs)  # fmt: skip
     steady = (steps - short) / (walls[steps] - walls[short])
     alone_s = steps / alone
     print(f"train: {steady:.1f} steps/s in steady state = {steady / alone:.0%} of the network "

@@ -124,3 +124,32 @@ def test_a_run_without_the_trained_cameras_is_refused_before_simulating(
     assert r.returncode == 2, r.stderr
     assert words in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_the_shipped_pixel_policy_stacks_on_its_documented_seed(tmp_path):
+    """models/policies/stack2_pixels reads no pose, and learned_stack2_pixels (its held-out
+    seed, the task's cameras) stacks offline; its last frames are among the outputs."""
+    shipped = ROOT / "models" / "policies" / "stack2_pixels"
+    features = json.loads((shipped / "config.json").read_text())["input_features"]
+    assert "observation.environment_state" not in features
+    assert {"observation.images.scene", "observation.images.wrist"} <= set(features)
+    assert sum(f.stat().st_size for f in shipped.iterdir()) < 10_000_000
+    r = cake("run", "--scenario", str(LEARNING), "--name", "learned_stack2_pixels", "--out",
+             str(tmp_path / "out"))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "goal reached: a on b" in r.stdout + r.stderr
+    assert "geometric learned" in r.stdout + r.stderr
+    for name in ("final_state.png", "camera_scene.png", "camera_wrist.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 1000
+
+
+def test_the_picture_of_what_it_saw_is_drawn(tmp_path):
+    """benchmarks/seeing.py runs the shipped policy on its held-out seed and draws it."""
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "seeing.py"), "--seed", "100001", "--out",
+         str(tmp_path / "saw.png")],
+        cwd=ROOT, capture_output=True, text=True, timeout=900,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "stack2, seed 100001: goal reached" in r.stdout
+    assert (tmp_path / "saw.png").stat().st_size > 10_000
