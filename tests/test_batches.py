@@ -117,3 +117,19 @@ def test_train_reads_through_the_columns(recording, tmp_path, monkeypatch):
     folder = train(recording, tmp_path / "run", recipe, device="cpu")
     assert (folder / "model.safetensors").is_file()
     assert made == [["observation.state", "observation.environment_state"]]
+
+
+def test_cameras_of_two_sizes_are_refused_where_the_policy_needs_one(recording, tmp_path):
+    """Diffusion Policy stacks its cameras: the small task's 96 x 96 and 64 x 64 are one
+    line, exit 2, before anything is read; the project's mlp has an encoder a camera."""
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.train", str(recording), "--out", str(tmp_path / "d"),
+         "--policy", "diffusion", "--inputs", "images"],
+        cwd=ROOT, capture_output=True, text=True, timeout=300,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "Diffusion Policy needs its cameras at one size; these are scene 96x96, wrist 64x64" in (
+        r.stderr
+    )
+    assert not (tmp_path / "d").exists()

@@ -215,6 +215,17 @@ def check(
         )
     info = _info(root)
     keys = input_keys(info["features"], recipe.inputs, root, recipe.policy, recipe.images.cameras)
+    sizes = {
+        k.rsplit(".", 1)[-1]: "x".join(str(n) for n in info["features"][k]["shape"][:2])
+        for k in keys
+        if k.startswith("observation.images.")
+    }
+    if recipe.policy == "diffusion" and len(set(sizes.values())) > 1:
+        raise InputError(
+            f"{root}: Diffusion Policy needs its cameras at one size; these are "
+            + ", ".join(f"{name} {size}" for name, size in sizes.items())
+            + ": train on one (--cameras NAME), or with --policy mlp (an encoder a camera)"
+        )
     frames = info.get("total_frames", 0)
     if isinstance(frames, int) and recipe.batch_size > frames:
         raise InputError(f"--batch-size {recipe.batch_size}: larger than {root}'s {frames} "
