@@ -187,8 +187,8 @@ def pixels(args) -> None:
                 made = train_once(data, run, "mlp", *flags)
                 s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
                 batch = made["recipe"]["batch_size"]
-                print(f"{row(label, s, made)}  batch {batch}, peak {made['peak_mib']:.0f} MiB",
-                      flush=True)  # fmt: skip
+                peak = f"{made['peak_mib']:.0f} MiB" if "peak_mib" in made else "-"
+                print(f"{row(label, s, made)}  batch {batch}, peak {peak}", flush=True)
 
 
 def compare(task: str, policy: str, args) -> None:
