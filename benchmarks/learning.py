@@ -28,11 +28,12 @@ Prints each row's frames and its success on the held-out seeds with the interval
 
 ``--pixels N``: a policy that sees. ``record`` N demonstrations of each task with its
 two cameras, then train on that one recording the state recipe and the image recipe
-(``--inputs images``: the joints, the cameras and the goal, no cube pose) with both
-cameras, the scene camera alone and the wrist camera alone, and evaluate each on the same
-held-out seeds. Prints the training's minutes, steps/s and peak memory per row.
+(``--inputs images``: the joints, the cameras and the goal, no cube pose), and evaluate
+each on the same held-out seeds; ``--views TASK...`` adds, for those tasks, the image
+recipe on the scene camera alone and on the wrist camera alone. Prints the training's
+minutes, steps/s and peak memory per row.
 
-    python benchmarks/learning.py --pixels 300 --tasks stack2 tower3
+    python benchmarks/learning.py --pixels 300 --tasks stack2 tower3 --views stack2
 
 ``--skills N``: learned skills under the planner. ``record`` N demonstrations of the
 ``skills`` task (generated five-cube problems), ``train`` its recipe (``--inputs skill``),
@@ -183,6 +184,8 @@ def pixels(args) -> None:
                       f"{seconds / 60:.1f} min", flush=True)  # fmt: skip
             print(f"{task}, {demos} demonstrations with the task's cameras")
             for label, tag, flags in rows:
+                if "--cameras" in flags and task not in args.views:
+                    continue
                 run = args.work / f"{task}_pixels{demos}_{tag}"
                 made = train_once(data, run, "mlp", *flags)
                 s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
@@ -321,6 +324,7 @@ def main() -> None:
         metavar="DEMOS",
         help="a policy that sees, from DEMOS demonstrations with cameras",
     )
+    p.add_argument("--views", nargs="*", default=[], help="--pixels: one camera at a time")
     args = p.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     print(machine())
