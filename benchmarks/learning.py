@@ -17,6 +17,16 @@ evaluation's episodes per minute.
 
     python benchmarks/learning.py --tasks stack2 --demos 100 300 --policies act
 
+Each trained row is followed by its profile: ``train``'s phases (loading the recording,
+answering batches, the network's updates, the checkpoint, from its ``train.json``), the
+rest of its whole process (start-up) and the evaluation's wall time. Each task's
+demonstrations are one recording (``--work/TASK_pool``, grown with ``record --resume``);
+a row of N demonstrations takes its first N seeds.
+
+``--all``: the whole table of docs/learning.md (every task x the recipe from 100, 300 and
+1,000 demonstrations; stack2 x ACT and Diffusion Policy; BC, DART and DAgger on tower5
+and blocks3), then the total time.
+
 ``--compare``: BC, DART and DAgger at equal numbers of expert-labelled frames, per task.
 DAgger records ``--start-demos`` demonstrations and runs ``--rounds`` rounds of
 ``--per-round`` rollouts (``train --dagger``, ``--beta``); BC then trains on the first
@@ -96,43 +106,68 @@ def cake(command: str, *args: str, peak: dict | None = None) -> float:
 
 
 def evaluate(task: str, policy: str, out: Path, episodes: int, seed: int) -> dict:
-    summary = out / "summary.json"
+    """``evaluate``'s summary (run if absent), with its whole process's wall time."""
+    summary, wall = out / "summary.json", out.parent / f"{out.name}_wall_s.json"
     if not summary.is_file():
         args = ["--suite", str(LEARNING), "--name", task, "--episodes", str(episodes)]
-        cake("evaluate", policy, *args, "--seed", str(seed), "--out", str(out))
-    return json.loads(summary.read_text())
+        seconds = cake("evaluate", policy, *args, "--seed", str(seed), "--out", str(out))
+        wall.write_text(json.dumps(seconds))
+    made = json.loads(summary.read_text())
+    return {**made, "wall_s": json.loads(wall.read_text()) if wall.is_file() else None}
+
+
+def profile(train: dict, evaluation: dict) -> str:
+    """Where a row's time went: train's phases (its train.json), the rest of its whole
+    process (start-up: imports, the policy's set-up; LeRobot's logging), the evaluation."""
+    phases = train.get("phases_s")
+    if not phases:
+        return "    phases: not recorded (a training from before train.json kept them)"
+    inner = sum(phases[k] for k in ("loading", "batches", "network", "checkpoint"))
+    rest = train["train_s"] - inner
+    text = " · ".join(f"{k} {phases[k]:.1f} s" for k in ("loading", "batches", "network",
+                                                         "checkpoint"))  # fmt: skip
+    ev = evaluation.get("wall_s")
+    ev = f"{ev:.0f} s for {evaluation['episodes']} episodes" if ev else "-"
+    return f"    phases: {text} · start-up and the rest {rest:.1f} s · evaluation {ev}"
+
+
+def recorded(task: str, episodes: int, work: Path, noise: float = 0.0) -> Path:
+    """The pool of ``task``'s recorded episodes (seeds 0, 1, ...; noised or not), grown to
+    ``episodes`` when it has fewer (``record --resume``): one recording per task and
+    noise, from which every row takes its first demonstrations."""
+    data = work / (f"{task}_pool" + (f"_noise{noise:g}" if noise else ""))
+    report = data / "report.json"
+    if report.is_file() and json.loads(report.read_text())["tried"] >= episodes:
+        return data
+    extra = ["--noise", str(noise)] if noise else []
+    seconds = cake("record", str(LEARNING), "--name", task, "--out", str(data), "--episodes",
+                   str(episodes), "--no-cameras", "--resume", *extra)  # fmt: skip
+    noised = f" (noise {noise:g})" if noise else ""
+    print(f"recorded {task} to {episodes} episodes{noised} in {seconds / 60:.1f} min", flush=True)
+    return data
+
+
+def demonstrations(task: str, demos: int, work: Path) -> Path:
+    """A dataset of the first ``demos`` seeds' kept demonstrations of ``task`` (taken from
+    its pool, recorded if absent)."""
+    pool = recorded(task, demos, work)
+    data = work / f"{task}_demos{demos}"
+    subset(pool, data, seeds_below=demos)
+    return data
 
 
 def trained(task: str, policy: str, demos: int, work: Path) -> tuple[Path, dict]:
     """The checkpoint of ``policy`` on ``demos`` demonstrations of ``task`` (made if absent),
     and the training's figures."""
-    data = work / f"{task}_demos{demos}"
-    if not (data / "meta" / "info.json").is_file():
-        cake("record", str(LEARNING), "--name", task, "--out", str(data), "--episodes",
-             str(demos), "--no-cameras")  # fmt: skip
+    data = demonstrations(task, demos, work)
     run = work / f"{task}_{policy}_demos{demos}"
-    figures = run / "figures.json"
-    if not figures.is_file():
-        wall = cake("train", str(data), "--out", str(run), "--policy", policy, "--device", "cpu")
-        steps = json.loads((run / "train.json").read_text())["recipe"]["steps"]
-        figures.write_text(json.dumps({"train_s": wall, "steps": steps}))
-    return run, json.loads(figures.read_text())
+    return run, train_once(data, run, policy)
 
 
-def recorded(task: str, episodes: int, work: Path, noise: float = 0.0) -> Path:
-    """A recording of ``episodes`` episodes of ``task`` (made if absent), noised or not."""
-    name = f"{task}_demos{episodes}" + (f"_noise{noise:g}" if noise else "")
-    data = work / name
-    if not (data / "meta" / "info.json").is_file():
-        extra = ["--noise", str(noise)] if noise else []
-        cake("record", str(LEARNING), "--name", task, "--out", str(data), "--episodes",
-             str(episodes), "--no-cameras", *extra)  # fmt: skip
-    return data
-
-
-def first_frames(pool: Path, frames: int, out: Path) -> dict:
-    """A dataset at ``out`` of ``pool``'s first kept episodes whose frames reach ``frames``
-    (all of them when they do not); its report."""
+def subset(pool: Path, out: Path, frames: int | None = None, seeds_below: int | None = None):
+    """A dataset at ``out`` of ``pool``'s kept episodes in seed order: those of seeds below
+    ``seeds_below``, or the first whose frames reach ``frames`` (all of them when they do
+    not); its report. Made once: an existing ``out`` is kept."""
     from cake_drake.learning import dataset
     from cake_drake.learning.recording import _load
 
@@ -140,8 +175,10 @@ def first_frames(pool: Path, frames: int, out: Path) -> dict:
         return json.loads((out / "report.json").read_text())
     report = json.loads((pool / "report.json").read_text())
     rows, total = [], 0
-    for seed in report["seeds"]:
-        if total >= frames:
+    for seed in sorted(report["seeds"]):
+        if (frames is not None and total >= frames) or (
+            seeds_below is not None and seed >= seeds_below
+        ):
             break
         row = json.loads((pool / "episodes" / f"ep_{seed}.json").read_text())
         rows.append(row)
@@ -149,7 +186,15 @@ def first_frames(pool: Path, frames: int, out: Path) -> dict:
     episodes = (_load(pool / "episodes" / f"ep_{r['seed']}.npz", r, images=False) for r in rows)
     written = dataset.write(out, episodes, report["fps"], report["control_mode"], ())
     seeds = [r["seed"] for r in rows]
-    report = {**report, "episodes": len(rows), "frames": written, "seeds": seeds, "cameras": []}
+    last = seeds_below if seeds_below is not None else max(seeds, default=-1) + 1
+    failed = [f for f in report.get("failed", []) if f["seed"] < last]
+    # The episodes themselves too (linked), as record keeps them: train --dagger reads them.
+    (out / "episodes").mkdir()
+    for seed in seeds:
+        for name in (f"ep_{seed}.npz", f"ep_{seed}.json"):
+            os.link(pool / "episodes" / name, out / "episodes" / name)
+    report = {**report, "episodes": len(rows), "frames": written, "seeds": seeds,
+              "cameras": [], "failed": failed, "tried": len(seeds) + len(failed)}  # fmt: skip
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
 
@@ -197,7 +242,7 @@ def pixels(args) -> None:
 def compare(task: str, policy: str, args) -> None:
     """BC, DART and DAgger rows of ``task`` at equal expert-labelled frames."""
     steps = ["--steps", str(args.steps)] if args.steps else []
-    start = recorded(task, args.start_demos, args.work)
+    start = demonstrations(task, args.start_demos, args.work)
     run = args.work / (
         f"{task}_{policy}_dagger{args.start_demos}x{args.rounds}x{args.per_round}"
         f"_beta{args.beta:g}_steps{args.steps or 'recipe'}"
@@ -212,7 +257,7 @@ def compare(task: str, policy: str, args) -> None:
         pool = recorded(task, args.pool, args.work, noise)
         tag = f"{task}_{label.lower()}{noise:g}_frames{frames}"
         data = args.work / f"{tag}_data"
-        report = first_frames(pool, frames, data)
+        report = subset(pool, data, frames=frames)
         trained_run = args.work / f"{tag}_{policy}_steps{args.steps or 'recipe'}"
         extra = f"{report['episodes']} demos" + (f", noise {noise:g}" if noise else "")
         if report["frames"] < frames:
@@ -300,6 +345,7 @@ def main() -> None:
     p.add_argument("--eval-seed", type=int, default=100_000, help="the first held-out seed")
     p.add_argument("--work", type=Path, default=ROOT / "outputs" / "learning_benchmark")
     p.add_argument("--compare", action="store_true", help="BC, DART, DAgger at equal labels")
+    p.add_argument("--all", action="store_true", help="the whole table of docs/learning.md")
     p.add_argument("--start-demos", type=int, default=20, help="DAgger's demonstrations")
     p.add_argument("--rounds", type=int, default=4, help="DAgger's rounds")
     p.add_argument("--per-round", type=int, default=20, help="DAgger's rollouts a round")
@@ -335,29 +381,52 @@ def main() -> None:
     if args.pixels:
         pixels(args)
         return
-    if args.compare:
-        print(f"  {'method':<14} {'labelled':>13}  {'success':>7} {'rate':>5}  "
-              f"{'95 % interval':<13}")  # fmt: skip
-        for task in args.tasks:
-            print(task)
-            for policy in args.policies:
-                compare(task, policy, args)
+    if args.all:
+        everything(args)
         return
+    if args.compare:
+        comparison(args, args.tasks, args.policies)
+        return
+    table(args, args.tasks, args.policies, args.demos)
+
+
+def comparison(args, tasks, policies) -> None:
+    print(f"  {'method':<14} {'labelled':>13}  {'success':>7} {'rate':>5}  "
+          f"{'95 % interval':<13}")  # fmt: skip
+    for task in tasks:
+        print(task)
+        for policy in policies:
+            compare(task, policy, args)
+
+
+def table(args, tasks, policies, demos_list, baselines: bool = True) -> None:
     print(f"  {'policy':<24} {'success':>7} {'rate':>6}  {'95 % interval':<13} "
           f"{'training':>17}  {'evaluation':>10}")  # fmt: skip
-    for task in args.tasks:
+    for task in tasks:
         print(task)
-        for name, policy in (("expert", None), ("random", RANDOM)):
+        for name, policy in (("expert", None), ("random", RANDOM)) if baselines else ():
             from cake_drake.scenario import load_scenario
 
             spec = policy or load_scenario(LEARNING, task).reference.factory
             s = evaluate(task, spec, args.work / f"{task}_{name}", args.episodes, args.eval_seed)
             print(row(name, s), flush=True)
-        for policy in args.policies:
-            for demos in args.demos:
+        for policy in policies:
+            for demos in demos_list:
                 run, figures = trained(task, policy, demos, args.work)
                 s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
                 print(row(f"{policy}, {demos} demos (state)", s, figures), flush=True)
+                print(profile(figures, s), flush=True)
+
+
+def everything(args) -> None:
+    """The whole table of docs/learning.md: every task x the mlp recipe from 100, 300 and
+    1,000 demonstrations; stack2 x ACT and Diffusion Policy from 300; BC, DART and DAgger
+    on tower5 and blocks3; then the total time."""
+    t0 = time.perf_counter()
+    table(args, ["stack2", "tower3", "tower5", "blocks3"], ["mlp"], [100, 300, 1000])
+    table(args, ["stack2"], ["act", "diffusion"], [300], baselines=False)
+    comparison(args, ["tower5", "blocks3"], ["mlp"])
+    print(f"the whole table: {(time.perf_counter() - t0) / 60:.0f} min (cached rows not redone)")
 
 
 if __name__ == "__main__":

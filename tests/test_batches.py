@@ -6,6 +6,7 @@ Real recordings (Drake, lerobot's writer), LeRobot's own dataset and training lo
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -117,6 +118,12 @@ def test_train_reads_through_the_columns(recording, tmp_path, monkeypatch):
     folder = train(recording, tmp_path / "run", recipe, device="cpu")
     assert (folder / "model.safetensors").is_file()
     assert made == [["observation.state", "observation.environment_state"]]
+    # Where the time went, kept for the benchmark's profile line: each phase measured, and
+    # the loop's parts within the whole loop.
+    phases = json.loads((tmp_path / "run" / "train.json").read_text())["phases_s"]
+    assert set(phases) == {"loading", "batches", "network", "checkpoint", "train"}
+    assert all(phases[k] > 0 for k in phases)
+    assert phases["batches"] + phases["network"] + phases["checkpoint"] < phases["train"]
 
 
 def test_cameras_of_two_sizes_are_refused_where_the_policy_needs_one(recording, tmp_path):

@@ -30,6 +30,7 @@ dataset ``lerobot_train`` makes for this one while it trains.
 from __future__ import annotations
 
 import contextlib
+import time
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -120,6 +121,7 @@ class ColumnDataset(torch.utils.data.Dataset):
 
     def __init__(self, base, keys: Iterable[str] | None = None) -> None:
         self.base = base
+        self.seconds = 0.0  # spent answering batches (__getitems__), for train's phases
         meta = base.meta
         table = base.hf_dataset.with_format("numpy")
         videos = set(meta.video_keys)
@@ -232,6 +234,7 @@ class ColumnDataset(torch.utils.data.Dataset):
     def __getitems__(self, indices) -> list[dict]:
         """The samples of ``indices``, one dict each, as ``LeRobotDataset.__getitem__``
         answers them (torch's ``DataLoader`` calls this with a whole batch)."""
+        t0 = time.perf_counter()
         rows = np.asarray(indices, np.int64)
         batch = self.gather(rows)
         transforms = getattr(self.base, "image_transforms", None)
@@ -244,6 +247,7 @@ class ColumnDataset(torch.utils.data.Dataset):
                     item[key] = transforms(item[key])
             item["task"] = self._tasks[int(task_index[i])]
             items.append(item)
+        self.seconds += time.perf_counter() - t0
         return items
 
     def __getitem__(self, idx: int) -> dict:
@@ -253,19 +257,44 @@ class ColumnDataset(torch.utils.data.Dataset):
 @contextlib.contextmanager
 def fast_batches(keys: Iterable[str] | None):
     """While inside, ``lerobot_train.train`` trains on :class:`ColumnDataset` over the
-    dataset it makes (``keys``: the features the policy reads)."""
+    dataset it makes (``keys``: the features the policy reads). Yields the training's
+    phases, filled in as it runs (seconds): ``loading`` (the recording read into memory),
+    ``batches`` (answering the loop's batches), ``network`` (LeRobot's ``update_policy``:
+    forward, backward, optimiser) and ``checkpoint`` (its ``save_checkpoint``); the
+    caller adds ``train``, the whole of LeRobot's loop (the rest of it is LeRobot's set-up
+    and logging)."""
     import lerobot.scripts.lerobot_train as lerobot_train
 
-    original = lerobot_train.make_train_eval_datasets
     keys = None if keys is None else list(keys)
+    phases = dict.fromkeys(("loading", "batches", "network", "checkpoint"), 0.0)
+    made: list[ColumnDataset] = []
+
+    def timed(name: str, function):
+        def call(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                phases[name] += time.perf_counter() - t0
+
+        return call
 
     def make(cfg):
-        train, held_out = original(cfg)
+        train, held_out = originals["make_train_eval_datasets"](cfg)
         wrap = None if held_out is None else ColumnDataset(held_out, keys)
-        return ColumnDataset(train, keys), wrap
+        made.append(ColumnDataset(train, keys))
+        return made[-1], wrap
 
-    lerobot_train.make_train_eval_datasets = make
+    originals = {
+        name: getattr(lerobot_train, name)
+        for name in ("make_train_eval_datasets", "update_policy", "save_checkpoint")
+    }
+    lerobot_train.make_train_eval_datasets = timed("loading", make)
+    lerobot_train.update_policy = timed("network", originals["update_policy"])
+    lerobot_train.save_checkpoint = timed("checkpoint", originals["save_checkpoint"])
     try:
-        yield
+        yield phases
     finally:
-        lerobot_train.make_train_eval_datasets = original
+        for name, function in originals.items():
+            setattr(lerobot_train, name, function)
+        phases["batches"] = sum(d.seconds for d in made)

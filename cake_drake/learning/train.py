@@ -29,6 +29,7 @@ import contextlib
 import json
 import os
 import sys
+import time
 import warnings
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -345,7 +346,8 @@ def train(
         config = out / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
         steps = f"--steps={recipe.steps}", f"--save_freq={recipe.steps}", f"--output_dir={out}"
         with _argv([f"--config_path={config}", "--resume=true", *steps]):
-            with fast_batches(keys):
+            with fast_batches(keys) as phases:
+                t0 = time.perf_counter()
                 lerobot_train()
     else:
         meta = LeRobotDatasetMetadata(repo_id, root=root)
@@ -377,9 +379,11 @@ def train(
             log_freq=max(1, min(200, recipe.steps // 10)),
             env_eval_freq=0,
         )
-        with _argv([]), fast_batches(keys):
+        with _argv([]), fast_batches(keys) as phases:
+            t0 = time.perf_counter()
             lerobot_train(cfg)
-    (out / "train.json").write_text(
-        json.dumps({"dataset": str(root), "recipe": asdict(recipe), "seed": seed}, indent=2) + "\n"
-    )
+    phases["train"] = time.perf_counter() - t0
+    made = {"dataset": str(root), "recipe": asdict(recipe), "seed": seed}
+    made["phases_s"] = {k: round(v, 3) for k, v in phases.items()}
+    (out / "train.json").write_text(json.dumps(made, indent=2) + "\n")
     return out / "checkpoints" / "last" / "pretrained_model"
