@@ -17,6 +17,7 @@ for the comparison. Each row prints successes, the 95 % Wilson interval and the 
 steps of the successful episodes.
 
     python benchmarks/expert.py [--episodes 40] [--blocks 3 8] [--workers 2]
+    python benchmarks/expert.py --experts closed-loop --kinds disturbed
 """
 
 from __future__ import annotations
@@ -233,6 +234,13 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--spaces", nargs="+", default=["joint_position", "ee_delta"])
     parser.add_argument("--experts", nargs="+", default=["replay", "closed-loop"])
+    parser.add_argument(
+        "--kinds",
+        nargs="+",
+        default=["clean", "disturbed"],
+        choices=["clean", "disturbed"],
+        help="which rows of each expert",
+    )
     args = parser.parse_args()
     print(machine())
     print(
@@ -244,7 +252,8 @@ def main() -> None:
         (space, which, disturb)
         for space in args.spaces
         for which in args.experts
-        for disturb in (0, args.disturb_steps)
+        for kind, disturb in (("clean", 0), ("disturbed", args.disturb_steps))
+        if kind in args.kinds
     ]
     jobs = [
         (space, which, seed, tuple(args.blocks), disturb)

@@ -73,6 +73,44 @@ def test_unstack_gripper_yaw_follows_the_cube_modulo_90_degrees(cube_yaw_deg):
     assert wps[2].X_WG.translation()[2] > X.translation()[2]
 
 
+@pytest.mark.parametrize("tilt_deg, cube_yaw_deg", [(34.0, 0.0), (38.0, 25.0), (12.0, -70.0)])
+def test_a_tilted_cube_is_pinched_by_the_two_faces_its_tilt_leaves_vertical(tilt_deg, cube_yaw_deg):
+    """A cube dropped against another lies tilted about one axis: the fingers (the grasp
+    frame's y axis) close along that axis, on the two faces that stand vertical."""
+    poses = layout([["a"], ["b"]])
+    p = poses["a"].translation() + [0.0, 0.0, 0.006]
+    R = RotationMatrix.MakeZRotation(math.radians(cube_yaw_deg)) @ RotationMatrix.MakeXRotation(
+        math.radians(tilt_deg)
+    )
+    poses["a"] = RigidTransform(R, p)
+    axis = R.col(0)  # the tilt's axis: horizontal
+    wps = waypoints_for(GroundAction("pick-up", ("a",)), WorldView(poses, X_HOME_G))
+    grasp = wps[1].X_WG
+    assert points_down(grasp)
+    np.testing.assert_allclose(grasp.translation(), p, atol=1e-12)
+    assert abs(abs(float(grasp.rotation().col(1) @ axis)) - 1.0) < 1e-9
+    # The faces the fingers close on are vertical; the other pair is tilted.
+    for k in (1, 2):
+        assert abs(R.col(k)[2]) > 0.1
+    # Of the two half turns, the one nearer the direction from the robot base.
+    x, y = p[:2]
+    assert abs(math.remainder(yaw_of(grasp) - math.atan2(y, x), 2 * math.pi)) <= math.pi / 2
+
+
+def test_a_cube_tilted_in_the_hand_is_released_with_its_lowest_corner_at_the_table():
+    poses = layout([["b"], ["a"]])
+    X_GB = RigidTransform(RotationMatrix.MakeXRotation(math.pi + math.radians(30)), [0, 0, 0])
+    world = holding(poses, "a", X_HOME_G, X_GB)
+    place = waypoints_for(GroundAction("put-down", ("a",)), world)[1].X_WG
+    held = place @ X_GB
+    lowest = held.translation()[2] - CUBE_SIZE / 2 * np.sum(np.abs(held.rotation().matrix()[2]))
+    assert lowest == pytest.approx(PARAMS.place_drop, abs=1e-9)  # not pressed into the table
+    assert points_down(place)
+    # A flat cube in the hand is set down as ever: its face place_drop above the table.
+    flat = waypoints_for(GroundAction("put-down", ("a",)), holding(poses, "a", X_HOME_G))[1].X_WG
+    assert flat.translation()[2] == pytest.approx(CUBE_SIZE / 2 + PARAMS.place_drop, abs=1e-9)
+
+
 def test_stack_place_height_comes_from_the_supports_measured_top():
     """Support sagged 3 mm and turned 10 deg; the cube slipped 5 mm in the hand."""
     poses = layout([["b"], ["a"]])

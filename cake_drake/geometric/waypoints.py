@@ -19,6 +19,11 @@ support's measured top, and the gripper pose at *place* from where the held cube
 actually sits in the hand (so a cube that slipped is still set down where it belongs).
 The gripper points down; its yaw follows the cube's yaw modulo 90 degrees, choosing the
 turn nearest to the direction from the robot base (where the wrist is comfortable).
+
+A cube lying tilted (dropped against another, say) is tilted about one of its axes, and
+the two faces that axis leaves vertical can still be pinched from above: the fingers then
+close along that axis (the yaw modulo 180 degrees). Set down, a cube that tilts in the
+hand is released with its lowest corner where a flat cube's face would be, and falls flat.
 """
 
 import math
@@ -30,6 +35,7 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from cake_drake.errors import ExecutionError
 from cake_drake.symbolic import GroundAction
+from cake_drake.world.facts import TILT_TOL, tilt
 from cake_drake.world.scene import CUBE_SIZE, SLOTS
 
 PICK_ACTIONS = ("pick-up", "unstack")
@@ -93,6 +99,26 @@ def face_yaw(X: RigidTransform) -> float:
     return float(math.atan2(side[1], side[0]))
 
 
+def grasp_yaw(X_WB: RigidTransform, preferred: float) -> float:
+    """The gripper's yaw for picking the cube at ``X_WB``, nearest to ``preferred``: a
+    quarter turn of its faces' yaw for a cube resting flat; for a tilted cube, the yaw at
+    which the fingers (the grasp frame's y axis) close along the cube's axis nearest to
+    horizontal, whose two faces stand vertical (a half turn of it)."""
+    if tilt(X_WB) <= TILT_TOL:
+        return _nearest_turn(face_yaw(X_WB), preferred)
+    R = X_WB.rotation().matrix()
+    u = R[:, int(np.argmin(np.abs(R[2, :])))]
+    # gripper_down(yaw)'s y axis is (sin yaw, -cos yaw, 0): along u at yaw(u) + 90 deg.
+    yaw = math.atan2(u[1], u[0]) + math.pi / 2
+    return yaw + round((preferred - yaw) / math.pi) * math.pi
+
+
+def _lowest(X_WB: RigidTransform) -> float:
+    """Height of the lowest corner of the cube at ``X_WB``."""
+    R = X_WB.rotation().matrix()
+    return float(X_WB.translation()[2] - CUBE_SIZE / 2 * np.sum(np.abs(R[2, :])))
+
+
 def _yaw(X: RigidTransform) -> float:
     return float(RollPitchYaw(X.rotation()).yaw_angle())
 
@@ -142,8 +168,7 @@ def waypoints_for(
         X_WB = poses[block]
         p = X_WB.translation()
         preferred = math.atan2(p[1], p[0]) + params.yaw_turns * math.pi / 2
-        yaw = _nearest_turn(face_yaw(X_WB), preferred)
-        R = gripper_down(yaw)
+        R = gripper_down(grasp_yaw(X_WB, preferred))
         z_transit = transit_height(poses, held=None, params=params)
         above = max(z_transit, p[2] + params.approach)
         return [
@@ -178,6 +203,12 @@ def waypoints_for(
         # Keep the gripper pointing straight down even if the cube tilted in the hand.
         R = gripper_down(_yaw(X_place))
         X_place = RigidTransform(R, X_place.translation())
+        # A cube tilted in the hand: released with its lowest corner where the flat cube's
+        # face would be (it then falls flat), not pressed into its support.
+        X_WB_held = X_place @ X_GB
+        if in_hand and tilt(X_WB_held) > TILT_TOL:
+            sink = (target[2] - CUBE_SIZE / 2) - _lowest(X_WB_held)
+            X_place = RigidTransform(R, X_place.translation() + [0.0, 0.0, max(sink, 0.0)])
         z_transit = max(transit_height(poses, block, params), X_place.translation()[2])
         above = X_place.translation().copy()
         above[2] = z_transit

@@ -22,7 +22,10 @@ every step from what it measures, the way the execution monitor
    held step never asks for more than an ``ee_delta`` step allows. The motion's clock
    advances only while the hand keeps up; a hand far off the motion (pushed, or moved by
    someone else) drops it, and the next one starts from where the hand is, first straight
-   up to the transit height when the hand is below it.
+   up to the transit height when the hand is below it. Once the world has been mended
+   (cubes may lie anywhere), each motion is checked against the cubes and turned a quarter
+   or raised where it would hit one (``solve_action``'s ``avoid_collisions``); a cube
+   lying tilted against another is picked by the two faces its tilt leaves vertical.
 
 The answer is in the task's action space: ``joint_position`` (the motion one step ahead),
 ``ee_delta`` (the move from the measured grasp frame to there, and the gripper) or
@@ -109,9 +112,6 @@ STILL = 0.001
 GRIP_WAIT_S = 0.5
 #: Replans, repeated actions and dropped motions an episode may take before it gives up.
 MAX_REPAIRS = 20
-#: rad: a cube resting on nothing the facts name, still and tilted less than this, is
-#: picked up and put down on a table slot.
-STRANDED_TILT = 0.35
 #: m: a goal's stacked cube farther than this off the one below is set down again.
 LOOSE = 0.8 * STACK_TOL
 #: Speed limits' scale at 10 Hz: a 10 Hz step then moves the hand less than ``EE_STEP``.
@@ -256,6 +256,8 @@ class ClosedLoopExpert:
         self._pending_pickups: tuple[str, ...] = ()
         self._stalls = 0  # motions dropped in a row because the hand did not follow
         self._measured: Measured | None = None
+        if getattr(self, "_collisions", None) is not None and self._collisions.blocks != self.cubes:
+            self._collisions = None  # kept across episodes of the same cubes
 
     def _set_plan(self, actions: tuple[GroundAction, ...]) -> None:
         self.plan = actions
@@ -297,16 +299,21 @@ class ClosedLoopExpert:
             if (step - since) * self.dt < REST_WAIT_S:
                 return self._hold(m)
             stuck = self._strandable(reading.facts, m, previous)
+            problems = "; ".join(reading.problems)
             if stuck is None:
                 return self._end(f"no plan from the measured state: {reading.problems[0]}")
             # Still, but on nothing the facts can name (across two cubes, on a corner):
             # taken as standing on the table, it is picked up and put down on a slot.
             self.stranded |= stuck
             self.current = None
-            if not self._repair("stranded", f"{', '.join(sorted(stuck))} rests on nothing", step):
+            why = f"{', '.join(sorted(stuck))} still on nothing the facts name ({problems})"
+            if not self._repair("stranded", why, step):
                 return None, True
             self.forced, self.next = 0, 0
-            self._pending_pickups = tuple(sorted(stuck))
+            # The highest first: a cube leaning on another is lifted off it before that one.
+            self._pending_pickups = tuple(
+                sorted(stuck, key=lambda c: (-m.cubes[c].translation()[2], c))
+            )
             canonical = self._stranded_facts(reading.facts, m)
         self._waiting_since = None
         facts = self.roles.from_canonical(canonical) | self.static
@@ -429,14 +436,16 @@ class ClosedLoopExpert:
         return frozenset(canonical) | extra
 
     def _strandable(self, canonical, m: Measured, before) -> set[str] | None:
-        """The cubes that read as nothing but stand still and nearly upright, if all do."""
+        """The cubes that read as nothing (across two cubes, or tilted against another) but
+        stand still, if all do. A tilted one is picked by the two faces its tilt leaves
+        vertical (:func:`cake_drake.geometric.waypoints.grasp_yaw`) and falls flat where it
+        is set down."""
         unread = set(self.cubes) - self._located(canonical) - self.stranded
         before = before or {}
         for c in unread:
             X = m.cubes[c]
             moved = np.linalg.norm(X.translation() - before[c].translation()) if c in before else 1
-            tilt = np.arccos(min(1.0, np.max(np.abs(X.rotation().matrix()[2, :]))))
-            if moved > STILL or tilt > STRANDED_TILT:
+            if moved > STILL:
                 return None
         return unread
 
@@ -509,12 +518,25 @@ class ClosedLoopExpert:
             q_up = self.ik.solve(X_up, q0)
             if q_up is not None:
                 traj.move(q_up, "retract", i, self.timing)
+        # Once the world has been mended, cubes may lie anywhere, close to where the hand
+        # goes: the motion is then checked against them, turned a quarter or raised where
+        # it would hit one (an undisturbed episode's cubes stand apart on the table's slots).
+        checker = self._checker() if self.repairs else None
         motion = solve_action(
-            meaning, i, self._world(m), self.ik, traj, self.timing, self.params, refine=True
-        )
+            meaning, i, self._world(m), self.ik, traj, self.timing, self.params,
+            checker=checker, avoid_collisions=checker is not None, refine=True,
+        )  # fmt: skip
         pending = motion.pending_after if meaning.name in PLACE_ACTIONS else None
         skill = skill_context(meaning, m.cubes, self.slots, self.params)
         return _Action(i, action, meaning, traj, motion.params, pending, skill=skill)
+
+    def _checker(self):
+        """The geometric layer's collision checker among this episode's cubes (made once)."""
+        if getattr(self, "_collisions", None) is None:
+            from cake_drake.geometric.collisions import CollisionChecker
+
+            self._collisions = CollisionChecker(self.cubes)
+        return self._collisions
 
     def _extend(self, a: _Action, m: Measured) -> None:
         """Above the target: the move down, planned from the poses measured now; at the

@@ -29,7 +29,7 @@ class Reading:
     problems: tuple[str, ...]
 
 
-def _tilt(X: RigidTransform) -> float:
+def tilt(X: RigidTransform) -> float:
     """Angle between the cube's nearest face normal and world z (cubes are symmetric)."""
     R = X.rotation().matrix()
     return float(np.arccos(np.clip(np.max(np.abs(R[2, :])), -1.0, 1.0)))
@@ -78,8 +78,8 @@ def read_facts(
     covered: set[str] = set()
     for name, X in sorted(poses.items()):
         p = X.translation()
-        if _tilt(X) > TILT_TOL:
-            problems.append(f"{name} is tilted by {np.degrees(_tilt(X)):.0f} deg")
+        if tilt(X) > TILT_TOL:
+            problems.append(f"{name} is tilted by {np.degrees(tilt(X)):.0f} deg")
             continue
         if abs(p[2] - size / 2) < HEIGHT_TOL:
             facts.add(("on-table", name))
