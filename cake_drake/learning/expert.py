@@ -197,6 +197,7 @@ class ClosedLoopExpert:
 
     def __post_init__(self) -> None:
         self.kin = Kinematics()
+        self._collisions = None  # the collision checker, made when first needed
 
     # --- the episode --------------------------------------------------------------------
 
@@ -256,7 +257,7 @@ class ClosedLoopExpert:
         self._pending_pickups: tuple[str, ...] = ()
         self._stalls = 0  # motions dropped in a row because the hand did not follow
         self._measured: Measured | None = None
-        if getattr(self, "_collisions", None) is not None and self._collisions.blocks != self.cubes:
+        if self._collisions is not None and self._collisions.blocks != self.cubes:
             self._collisions = None  # kept across episodes of the same cubes
 
     def _set_plan(self, actions: tuple[GroundAction, ...]) -> None:
@@ -532,7 +533,7 @@ class ClosedLoopExpert:
 
     def _checker(self):
         """The geometric layer's collision checker among this episode's cubes (made once)."""
-        if getattr(self, "_collisions", None) is None:
+        if self._collisions is None:
             from cake_drake.geometric.collisions import CollisionChecker
 
             self._collisions = CollisionChecker(self.cubes)
