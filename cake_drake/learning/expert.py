@@ -384,6 +384,9 @@ class ClosedLoopExpert:
         if self.next < self.forced and self.kernels[self.next] <= facts:
             return self.next
         self.forced = 0
+        # A stranded cube that reads as resting on something again (the one it leaned on
+        # was lifted off, a leaning tower came upright) is the planner's, as any other.
+        self._pending_pickups = tuple(c for c in self._pending_pickups if c in self.stranded)
         if self._pending_pickups and ("arm-empty",) in canonical:
             cube, self._pending_pickups = self._pending_pickups[0], self._pending_pickups[1:]
             last = (self.roles.action(PICK, cube), self.roles.action(PLACE, cube))
