@@ -147,11 +147,27 @@ def recorded(task: str, episodes: int, work: Path, noise: float = 0.0) -> Path:
     return data
 
 
+def recipe(task: str) -> dict:
+    """``task``'s training recipe as learning.yaml has it now."""
+    from dataclasses import asdict
+
+    from cake_drake.scenario import load_scenario
+
+    return asdict(load_scenario(LEARNING, task).training)
+
+
+def recipe_tag(task: str) -> str:
+    """A recipe's length, in the names of what is trained with it (a recipe changed in
+    learning.yaml trains anew)."""
+    r = recipe(task)
+    return f"steps{r['steps']}_batch{r['batch_size']}"
+
+
 def demonstrations(task: str, demos: int, work: Path) -> Path:
     """A dataset of the first ``demos`` seeds' kept demonstrations of ``task`` (taken from
-    its pool, recorded if absent)."""
+    its pool, recorded if absent), carrying the task's recipe as learning.yaml has it."""
     pool = recorded(task, demos, work)
-    data = work / f"{task}_demos{demos}"
+    data = work / f"{task}_demos{demos}_{recipe_tag(task)}"
     subset(pool, data, seeds_below=demos)
     return data
 
@@ -160,7 +176,7 @@ def trained(task: str, policy: str, demos: int, work: Path) -> tuple[Path, dict]
     """The checkpoint of ``policy`` on ``demos`` demonstrations of ``task`` (made if absent),
     and the training's figures."""
     data = demonstrations(task, demos, work)
-    run = work / f"{task}_{policy}_demos{demos}"
+    run = work / f"{task}_{policy}_demos{demos}_{recipe_tag(task)}"
     return run, train_once(data, run, policy)
 
 
@@ -194,7 +210,8 @@ def subset(pool: Path, out: Path, frames: int | None = None, seeds_below: int | 
         for name in (f"ep_{seed}.npz", f"ep_{seed}.json"):
             os.link(pool / "episodes" / name, out / "episodes" / name)
     report = {**report, "episodes": len(rows), "frames": written, "seeds": seeds,
-              "cameras": [], "failed": failed, "tried": len(seeds) + len(failed)}  # fmt: skip
+              "cameras": [], "failed": failed, "tried": len(seeds) + len(failed),
+              "training": recipe(report["task"])}  # fmt: skip
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
 
@@ -245,7 +262,7 @@ def compare(task: str, policy: str, args) -> None:
     start = demonstrations(task, args.start_demos, args.work)
     run = args.work / (
         f"{task}_{policy}_dagger{args.start_demos}x{args.rounds}x{args.per_round}"
-        f"_beta{args.beta:g}_steps{args.steps or 'recipe'}"
+        f"_beta{args.beta:g}_steps{args.steps or recipe_tag(task)}"
     )
     flags = ["--dagger", str(args.rounds), "--episodes-per-round", str(args.per_round),
              "--beta", str(args.beta)]  # fmt: skip
@@ -255,10 +272,10 @@ def compare(task: str, policy: str, args) -> None:
     runs = []
     for label, noise in (("BC", 0.0), ("DART", args.noise)):
         pool = recorded(task, args.pool, args.work, noise)
-        tag = f"{task}_{label.lower()}{noise:g}_frames{frames}"
+        tag = f"{task}_{label.lower()}{noise:g}_frames{frames}_{recipe_tag(task)}"
         data = args.work / f"{tag}_data"
         report = subset(pool, data, frames=frames)
-        trained_run = args.work / f"{tag}_{policy}_steps{args.steps or 'recipe'}"
+        trained_run = args.work / f"{tag}_{policy}_steps{args.steps or recipe_tag(task)}"
         extra = f"{report['episodes']} demos" + (f", noise {noise:g}" if noise else "")
         if report["frames"] < frames:
             extra += f" (all the pool has: --pool {args.pool} is short)"
