@@ -144,6 +144,60 @@ def test_the_same_seeds_give_the_same_parquet_bytes_on_one_worker_and_two(record
 
 @needs_lerobot
 @pytest.mark.slow
+def test_skipping_lerobots_image_embedding_writes_the_same_parquet_bytes(recorded, tmp_path):
+    """Our features hold no image (cameras are videos): the writer's shortcut past
+    ``embed_images`` changes nothing LeRobot writes."""
+    import pyarrow.parquet as pq
+    from lerobot.datasets import dataset_writer
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from cake_drake.learning import dataset
+    from cake_drake.learning.recording import _load
+
+    folder, _ = recorded
+    report = json.loads((folder / "ds1" / "report.json").read_text())
+    rows = [json.loads((folder / "ds1" / "episodes" / f"ep_{s}.json").read_text())
+            for s in report["seeds"]]  # fmt: skip
+
+    def episodes():
+        for row in rows:
+            npz = folder / "ds1" / "episodes" / f"ep_{row['seed']}.npz"
+            yield _load(npz, row, images=False)
+
+    embedded = []
+    real = dataset_writer.embed_images
+
+    def counted(table):
+        embedded.append(len(table))
+        return real(table)
+
+    dataset.write(tmp_path / "fast", episodes(), 10, "joint_position", ())
+    dataset_writer.embed_images = counted
+    try:
+        with dataset._quiet():
+            dataset._write(LeRobotDataset, tmp_path / "lerobot", episodes(), 10,
+                           "joint_position", ())  # fmt: skip
+    finally:
+        dataset_writer.embed_images = real
+    assert dataset_writer.embed_images is real and len(embedded) == len(rows)
+    fast = sorted((tmp_path / "fast").rglob("*.parquet"))
+    plain = sorted((tmp_path / "lerobot").rglob("*.parquet"))
+    assert [p.relative_to(tmp_path / "fast") for p in fast] == [
+        p.relative_to(tmp_path / "lerobot") for p in plain
+    ]
+    for a, b in zip(fast, plain, strict=True):
+        ta, tb = pq.read_table(a), pq.read_table(b)
+        assert ta.equals(tb), a
+        # The schema's metadata too, but for the fingerprint of the skipped map: a cache
+        # key of ``datasets``, which nothing reads back.
+        meta = [json.loads((t.schema.metadata or {}).get(b"huggingface", b"{}")) for t in (ta, tb)]
+        assert [{k: v for k, v in m.items() if k != "fingerprint"} for m in meta] == [
+            {k: v for k, v in meta[1].items() if k != "fingerprint"}
+        ] * 2, a
+
+
+@needs_lerobot
+@pytest.mark.slow
 def test_on_local_ray_the_same_seeds_give_the_same_parquet_bytes(recorded):
     pytest.importorskip("ray")
     folder, _ = recorded

@@ -168,8 +168,25 @@ def write(root: Path, episodes: Iterable, fps: float, control_mode: str, cameras
     require_lerobot()
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    with _quiet():
+    with _quiet(), _no_image_embedding():
         return _write(LeRobotDataset, root, episodes, fps, control_mode, cameras)
+
+
+@contextlib.contextmanager
+def _no_image_embedding():
+    """LeRobot's writer passes every saved episode, row by row, through ``embed_images``
+    (about 2 ms a frame), which only changes features of dtype ``image``. Ours are state
+    and video: the step is skipped while we write (half the writer's time), and LeRobot's
+    writer is otherwise unchanged: the same tables and features, less the map's cache
+    fingerprint in the schema's metadata (tests/test_record.py checks it)."""
+    from lerobot.datasets import dataset_writer
+
+    embed = dataset_writer.embed_images
+    dataset_writer.embed_images = lambda dataset: dataset
+    try:
+        yield
+    finally:
+        dataset_writer.embed_images = embed
 
 
 def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  # noqa: N803
