@@ -259,10 +259,11 @@ def pixels(args) -> None:
 def compare(task: str, policy: str, args) -> None:
     """BC, DART and DAgger rows of ``task`` at equal expert-labelled frames."""
     steps = ["--steps", str(args.steps)] if args.steps else []
+    length = f"steps{args.steps}" if args.steps else recipe_tag(task)
     start = demonstrations(task, args.start_demos, args.work)
     run = args.work / (
         f"{task}_{policy}_dagger{args.start_demos}x{args.rounds}x{args.per_round}"
-        f"_beta{args.beta:g}_steps{args.steps or recipe_tag(task)}"
+        f"_beta{args.beta:g}_{length}"
     )
     flags = ["--dagger", str(args.rounds), "--episodes-per-round", str(args.per_round),
              "--beta", str(args.beta)]  # fmt: skip
@@ -272,10 +273,10 @@ def compare(task: str, policy: str, args) -> None:
     runs = []
     for label, noise in (("BC", 0.0), ("DART", args.noise)):
         pool = recorded(task, args.pool, args.work, noise)
-        tag = f"{task}_{label.lower()}{noise:g}_frames{frames}_{recipe_tag(task)}"
-        data = args.work / f"{tag}_data"
+        tag = f"{task}_{label.lower()}{noise:g}_frames{frames}"
+        data = args.work / f"{tag}_{recipe_tag(task)}_data"
         report = subset(pool, data, frames=frames)
-        trained_run = args.work / f"{tag}_{policy}_steps{args.steps or recipe_tag(task)}"
+        trained_run = args.work / f"{tag}_{policy}_{length}"
         extra = f"{report['episodes']} demos" + (f", noise {noise:g}" if noise else "")
         if report["frames"] < frames:
             extra += f" (all the pool has: --pool {args.pool} is short)"

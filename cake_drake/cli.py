@@ -942,7 +942,10 @@ problem's size; --seed sets the first episode's seed (default: the scenario's), 
 held-out seeds can be chosen.
 
 Writes to --out (default outputs/evaluate/): results.parquet and results.csv (one row
-per episode), summary.json and success.png. Exit codes: 0 done; 2 bad input; 3 the policy failed;
+per episode: its verdict, why it ended and the goal's facts still missing at its end),
+summary.json (with how often each goal fact was missing at a failure's end) and
+success.png; --frames K adds failures.png, the last picture of the first K failed
+episodes, to see where a policy goes wrong. Exit codes: 0 done; 2 bad input; 3 the policy failed;
 4 the outputs could not be written.
 """
 
@@ -961,6 +964,10 @@ def evaluate_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", default="auto", help="a checkpoint's device: auto | cpu | cuda")
     p.add_argument("--blocks", type=int, nargs=2, metavar=("LO", "HI"), help="problem sizes")
     p.add_argument("--workers", type=int, help="worker processes (default: cores)")
+    p.add_argument(
+        "--frames", type=int, default=0, metavar="K",
+        help="failures.png: the last picture of the first K failed episodes",
+    )  # fmt: skip
     _ray_flag(p)
     p.add_argument("--out", type=Path, default=Path("outputs") / "evaluate")
     return p
@@ -979,10 +986,17 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     workers = _workers(args.workers)
     if not 1 <= args.episodes <= 100_000:
         raise InputError(f"--episodes {args.episodes}: from 1 to 100000")
+    if not 0 <= args.frames <= 64:
+        raise InputError(f"--frames {args.frames}: from 0 (no picture) to 64 failed episodes")
     scenario = load_scenario(args.suite, args.name)
     checkpoint = Path(args.policy).is_dir() or not is_plugin(args.policy)
     spec = replace(spec_from_scenario(scenario, args.policy), cameras=())
     skills = checkpoint and _is_skill(Path(args.policy))
+    if skills and args.frames:
+        raise InputError(
+            f"--frames {args.frames}: learned skills run whole runs under the planner; "
+            "python -m cake_drake.run with the skill checkpoint draws one's end"
+        )
     if skills:  # learned skills: the demonstrator's place under the planner
         from cake_drake.learning.skills import check_folder
 
@@ -1005,18 +1019,22 @@ def main_evaluate(argv: list[str] | None = None) -> int:
         if not 1 <= lo <= hi <= 12:
             raise InputError(f"--blocks {lo} {hi}: from 1 to 12 cubes, LO <= HI")
         spec = replace(spec, blocks=(lo, hi), problem=None)
-    names = ("results.parquet", "results.csv", "summary.json", "success.png")
+    names = ("results.parquet", "results.csv", "summary.json", "success.png", "failures.png")
     with OutputDir(args.out, "evaluate", names, [args.suite]) as out:
         from cake_drake.plugins import resolve
 
         if not checkpoint:
             resolve(args.policy, {}, "policy")  # refused before any episode
         seeds = [first + k for k in range(args.episodes)]
-        rows, summary = evaluate(spec, seeds, workers, _ray(args.ray, workers))
+        rows, summary = evaluate(spec, seeds, workers, _ray(args.ray, workers), args.frames)
         from cake_drake.sweeps.table import write_table
 
+        failed = [r.pop("final") for r in rows if "final" in r]
+        if failed:
+            _failures_picture([r for r in rows if not r["success"]], failed,
+                              out.path("failures.png"))  # fmt: skip
         keys = ["seed", "blocks", "success", "steps", "wall_s", "reason", "task"]
-        keys += ["repeats", "replans"] if skills else []
+        keys += ["repeats", "replans"] if skills else ["missing"]
         out.path("results.parquet"), out.path("results.csv")  # declared, written below
         write_table(sorted(rows, key=lambda r: r["seed"]), out.staging, keys, exact=True)
         out.write_json("summary.json", summary)
@@ -1208,6 +1226,31 @@ def _main_dagger(args: argparse.Namespace, recipe) -> int:
         f"expert-labelled frames); checkpoint {args.out}/checkpoints/last/pretrained_model"
     )
     return EXIT_OK
+
+
+def _failures_picture(rows: list[dict], frames: list, path: Path) -> None:
+    """The last picture of each of the first failed episodes (``rows``, in seed order),
+    titled with its seed, why it ended and the goal's facts still missing."""
+    import textwrap
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    columns = min(4, len(frames))
+    lines = (len(frames) + columns - 1) // columns
+    fig, axes = plt.subplots(lines, columns, figsize=(4 * columns, 3.6 * lines), dpi=80,
+                             squeeze=False)  # fmt: skip
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, row, frame in zip(axes.flat, rows, frames, strict=False):
+        ax.imshow(frame)
+        said = (f"seed {row['seed']}: {row['reason']}", f"missing {row['missing'] or 'nothing'}")
+        ax.set_title("\n".join(line for s in said for line in textwrap.wrap(s, 48)), fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
 
 
 def _success_plot(summary: dict, path: Path) -> None:

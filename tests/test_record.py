@@ -246,8 +246,9 @@ def test_evaluation_tells_the_expert_from_the_random_policy(tmp_path):
     results = {}
     for policy in ("examples.expert_policy:make", "examples.random_policy:make"):
         name = policy.split(".")[1].split(":")[0]
+        frames = ["--frames", "2"] if name == "random_policy" else []
         r = cake("evaluate", policy, "--suite", "suite.yaml", "--name", "small", "--episodes",
-                 "3", "--out", name, cwd=tmp_path)  # fmt: skip
+                 "3", "--out", name, *frames, cwd=tmp_path)  # fmt: skip
         assert r.returncode == 0, r.stderr
         results[name] = json.loads((tmp_path / name / "summary.json").read_text())
         rows = list(csv.DictReader((tmp_path / name / "results.csv").open()))
@@ -258,3 +259,19 @@ def test_evaluation_tells_the_expert_from_the_random_policy(tmp_path):
     assert results["random_policy"]["success"] == 0
     lo, hi = results["random_policy"]["ci95"]
     assert lo == 0.0 and 0.4 < hi < 0.8  # Wilson's interval for 0/3
+    # Where the failures stopped: the goal's facts missing at each end, counted, and the
+    # first two failures' last pictures side by side.
+    rows = list(csv.DictReader((tmp_path / "random_policy" / "results.csv").open()))
+    assert all(r["missing"].startswith("(") for r in rows), rows
+    counted = results["random_policy"]["missing_at_end"]
+    assert sum(counted.values()) == sum(r["missing"].count("(") for r in rows) > 0
+    assert results["expert_policy"]["missing_at_end"] == {}
+    assert not (tmp_path / "expert_policy" / "failures.png").exists()
+    from PIL import Image
+
+    with Image.open(tmp_path / "random_policy" / "failures.png") as picture:
+        assert picture.size[0] > 1.5 * picture.size[1]  # two pictures in a row
+    r = cake("evaluate", "examples.random_policy:make", "--suite", "suite.yaml", "--name",
+             "small", "--frames", "65", "--out", "refused", cwd=tmp_path)  # fmt: skip
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--frames 65" in r.stderr
+    assert not (tmp_path / "refused").exists()

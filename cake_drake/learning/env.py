@@ -22,7 +22,8 @@ simulated seconds) and returns what the policy slot observes.
   gives the same problem).
 - reward: the fraction of the goal's facts measured true in the world; ``info`` has
   ``is_success`` (every goal fact true, every stacked cube within 5 mm of the one below),
-  the English instruction ``task`` and the ``goal`` facts.
+  the English instruction ``task``, the ``goal`` facts and those ``missing`` (not
+  measured true now).
 - ``terminated`` on success, or when a cube has left the table (the world cannot be
   recovered); ``truncated`` after ``max_steps`` steps (0, the default: scaled to the
   task, 20 s plus 8 s per action of the classical plan; ``env.unwrapped.budget``).
@@ -318,6 +319,7 @@ class StackEnv(gymnasium.Env):
             "unrecoverable": progress.lost,
             "task": o["task"],
             "goal": o["goal"],
+            "missing": tuple(sorted(f"({' '.join(f)})" for f in progress.missing)),
             "cubes": o["cubes"],
             "steps": self._steps,
         }

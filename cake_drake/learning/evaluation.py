@@ -32,22 +32,28 @@ def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def _evaluate_one(args) -> dict:
-    """One episode's row, no frames (run in a worker)."""
-    spec, seed = args
+    """One episode's row, no frames but, with ``final``, a failed episode's last picture
+    (run in a worker)."""
+    spec, seed, final = args
     if spec.policy == SKILL_POLICY:  # learned skills under the planner: a run per episode
         from cake_drake.learning.skills import episode
 
         return episode(spec, seed)
-    ep = rollout(spec, seed, record=False)
-    return {k: v for k, v in asdict(ep).items() if k not in FRAMES}
+    ep = rollout(spec, seed, record=False, final_frame=final)
+    row = {k: v for k, v in asdict(ep).items() if k not in FRAMES}
+    return {**row, "final": ep.final} if ep.final is not None else row
 
 
 def evaluate(
-    spec: EpisodeSpec, seeds: list[int], workers: int, ray=None
+    spec: EpisodeSpec, seeds: list[int], workers: int, ray=None, frames: int = 0
 ) -> tuple[list[dict], dict]:
     """Rows (one per episode, in seed order) and the summary of ``spec.policy`` over
-    ``seeds``, on a local pool or on ``ray``."""
-    rows = map_ordered(_evaluate_one, [(spec, s) for s in seeds], workers, ray)
+    ``seeds``, on a local pool or on ``ray``; the first ``frames`` failed episodes' rows
+    keep their last picture (``final``)."""
+    jobs = [(spec, s, bool(frames)) for s in seeds]
+    rows = map_ordered(_evaluate_one, jobs, workers, ray)
+    for row in [r for r in rows if "final" in r][frames:]:
+        del row["final"]
     wins = sum(r["success"] for r in rows)
     lo, hi = wilson(wins, len(rows))
     sizes = {}
@@ -66,6 +72,12 @@ def evaluate(
         "mean_steps": float(np.mean([r["steps"] for r in rows])) if rows else 0.0,
         "mean_wall_s": float(np.mean([r["wall_s"] for r in rows])) if rows else 0.0,
         "reasons": dict(Counter(r["reason"] for r in rows)),
+        # Where the failures stopped: how often each goal fact was missing at their end.
+        "missing_at_end": dict(
+            Counter(
+                f for r in rows if not r["success"] for f in _facts(r.get("missing", ""))
+            ).most_common()
+        ),
     }
     if rows and "repeats" in rows[0]:  # under the planner: what the monitor's loop did
         mended = [r for r in rows if r["repeats"] or r["replans"]]
@@ -76,3 +88,8 @@ def evaluate(
             "replans": int(sum(r["replans"] for r in rows)),
         }
     return rows, summary
+
+
+def _facts(text: str) -> list[str]:
+    """``"(on a b) (on-table c)"`` -> ``["(on a b)", "(on-table c)"]``."""
+    return [f"({f.strip(' ()')})" for f in text.split(")") if f.strip(" (")]

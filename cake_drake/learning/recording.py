@@ -239,7 +239,8 @@ def _load(path: Path, row: dict, images: bool = True) -> Episode:
         skills, grounds = _skill_frames(z, len(actions))
         return Episode(
             row["seed"], row["success"], row["reason"], row["steps"], row["wall_s"],
-            str(z["task"]), row["blocks"], z["states"], z["environment"], actions, frames,
+            str(z["task"]), row["blocks"], row.get("missing", ""), z["states"],
+            z["environment"], actions, frames,
             np.zeros(len(actions), np.int64) if actors is None else actors, executed,
             skills, grounds,
         )  # fmt: skip

@@ -94,10 +94,11 @@ class EpisodeSpec:
     placement: tuple[float, float] = (0.0, 0.0)  # world.placement: xy (m), yaw (degrees)
     noise: float = 0.0  # DART: noise added to the executed action (units: noise_scale)
 
-    def env(self):
+    def env(self, render_mode: str | None = None):
         from cake_drake.learning.env import StackEnv
 
         return StackEnv(
+            render_mode=render_mode,
             blocks=self.blocks,
             problem=self.problem,
             obs_mode="state+rgb" if self.cameras else "state",
@@ -133,6 +134,7 @@ class Teacher:
 #: An episode's frame arrays (the rest of an :class:`Episode` is its row in a table).
 FRAMES = (
     "states", "environment", "actions", "images", "actors", "executed", "skills", "grounds",
+    "final",
 )  # fmt: skip
 
 
@@ -147,6 +149,7 @@ class Episode:
     wall_s: float
     task: str = ""  # the instruction in English
     blocks: int = 0
+    missing: str = ""  # the goal's facts not measured true at the end, e.g. "(on b a)"
     states: np.ndarray | None = None  # (T, 8) float32
     environment: np.ndarray | None = None  # (T, 240) float32: observation.environment_state
     actions: np.ndarray | None = None  # (T, A) float32
@@ -157,6 +160,8 @@ class Episode:
     #: frame, as a learned skill reads it (observation.skill) and by name (ground_action).
     skills: np.ndarray | None = None
     grounds: np.ndarray | None = None
+    #: (480, 640, 3) uint8: the world at the end of a failed episode (``final_frame``).
+    final: np.ndarray | None = None
 
 
 def _make_policy(spec: str, options: dict):
@@ -180,14 +185,19 @@ def _answer(policy, label: str, obs, spec: EpisodeSpec, kin, counts):
 
 
 def rollout(
-    spec: EpisodeSpec, seed: int, record: bool = True, teacher: Teacher | None = None
+    spec: EpisodeSpec,
+    seed: int,
+    record: bool = True,
+    teacher: Teacher | None = None,
+    final_frame: bool = False,
 ) -> Episode:
     """Run the policy ``spec.policy`` for one episode of ``spec.env()`` reset with ``seed``;
-    with a ``teacher``, label every step with its answer (see the module)."""
+    with a ``teacher``, label every step with its answer (see the module); with
+    ``final_frame``, a failed episode keeps a picture of how it ended."""
     from cake_drake.geometric.ik import Kinematics
     from cake_drake.policy import spaces
 
-    env = spec.env()
+    env = spec.env("rgb_array" if final_frame else None)
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
     task = env.unwrapped.policy_task
@@ -253,8 +263,10 @@ def rollout(
         reason = f"the policy said done: {ender.reason}"
     ep = Episode(
         seed, bool(info["is_success"]), reason, steps, time.perf_counter() - t0,
-        info["task"], len(info["cubes"]),
+        info["task"], len(info["cubes"]), " ".join(info["missing"]),
     )  # fmt: skip
+    if final_frame and not ep.success:
+        ep.final = env.render()
     if record and actions:
         ep.states, ep.actions = np.stack(states), np.stack(actions)
         ep.environment = np.stack(environment)
