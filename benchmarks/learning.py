@@ -110,6 +110,7 @@ def evaluate(task: str, policy: str, out: Path, episodes: int, seed: int) -> dic
     summary, wall = out / "summary.json", out.parent / f"{out.name}_wall_s.json"
     if not summary.is_file():
         args = ["--suite", str(LEARNING), "--name", task, "--episodes", str(episodes)]
+        args += ["--frames", "8"]  # failures.png: how the first failures end
         seconds = cake("evaluate", policy, *args, "--seed", str(seed), "--out", str(out))
         wall.write_text(json.dumps(seconds))
     made = json.loads(summary.read_text())
@@ -293,6 +294,7 @@ def compare(task: str, policy: str, args) -> None:
             f"train {made['train_s'] / 60:5.1f} min  {extra}",
             flush=True,
         )
+        print(failures(s), flush=True)
 
 
 def skills(args) -> None:
@@ -335,9 +337,22 @@ def skills(args) -> None:
                     f"{m['rescued']}/{m['episodes_with_repeats_or_replans']}",
                     flush=True,
                 )
-                failures = {k: v for k, v in s["reasons"].items() if k != "goal reached"}
-                for reason, count in sorted(failures.items(), key=lambda kv: -kv[1])[:3]:
+                why = {k: v for k, v in s["reasons"].items() if k != "goal reached"}
+                for reason, count in sorted(why.items(), key=lambda kv: -kv[1])[:3]:
                     print(f"      {count} x {reason[:110]}")
+
+
+def failures(s: dict) -> str:
+    """How a row's failed episodes ended: why, and the goal's facts most often missing at
+    their end (the first failures' last pictures are the evaluation's failures.png)."""
+    why = {k: v for k, v in s["reasons"].items() if k != "goal reached"}
+    if not why:
+        return "    failures: none"
+    text = "; ".join(f"{v}x {k}" for k, v in sorted(why.items(), key=lambda kv: -kv[1]))
+    missing = list(s.get("missing_at_end", {}).items())[:4]
+    if missing:
+        text += " · missing at the end: " + ", ".join(f"{f} {n}" for f, n in missing)
+    return f"    failures: {text}"
 
 
 def row(name: str, s: dict, train: dict | None = None) -> str:
@@ -434,6 +449,7 @@ def table(args, tasks, policies, demos_list, baselines: bool = True) -> None:
                 s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
                 print(row(f"{policy}, {demos} demos (state)", s, figures), flush=True)
                 print(profile(figures, s), flush=True)
+                print(failures(s), flush=True)
 
 
 def everything(args) -> None:
