@@ -18,6 +18,15 @@ steps of the successful episodes.
 
     python benchmarks/expert.py [--episodes 40] [--blocks 3 8] [--workers 2]
     python benchmarks/expert.py --experts closed-loop --kinds disturbed
+
+``--profile TASK``: where a recording's time goes, on one core: ``--episodes`` of a task
+of models/scenarios/learning.yaml recorded as ``record`` does (the same rollout, no
+cameras), each step split into the expert's own answer (``act``: reading the facts,
+planning, IK, the next target) and the environment's step (the simulation and the
+observation), then the episodes written as LeRobot writes them (``record``'s writer).
+Prints milliseconds a step and a frame, the shares and the episodes a minute.
+
+    python benchmarks/expert.py --profile tower5 --episodes 10
 """
 
 from __future__ import annotations
@@ -202,6 +211,73 @@ def disturbed_episode(
     return Outcome(seed, bool(info["is_success"]), steps, disturbed_at, dropped, reason)
 
 
+# --- where a recording's time goes --------------------------------------------------------
+
+#: Seconds in the profiled expert's ``act`` (this process: the rollout runs here).
+ACT_S = [0.0]
+
+
+def timed_expert(**options):
+    """The closed-loop expert, its ``act`` timed into :data:`ACT_S` (a policy factory)."""
+    import time
+
+    from cake_drake.learning.expert import make
+
+    expert = make(**options)
+    act = expert.act
+
+    def timed(observation):
+        t0 = time.perf_counter()
+        try:
+            return act(observation)
+        finally:
+            ACT_S[0] += time.perf_counter() - t0
+
+    expert.act = timed
+    return expert
+
+
+def profile(task: str, episodes: int) -> None:
+    import sys
+    import tempfile
+    import time
+    from dataclasses import replace
+
+    from cake_drake.learning import dataset
+    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.learning.rollout import rollout
+    from cake_drake.scenario import load_scenario
+
+    learning = Path(__file__).resolve().parents[1] / "models" / "scenarios" / "learning.yaml"
+    spec = spec_from_scenario(load_scenario(learning, task))
+    me = sys.modules[__name__].__name__  # "__main__" when run as a script
+    spec = replace(spec, cameras=(), policy=f"{me}:timed_expert")
+    kept, wall, steps = [], 0.0, 0
+    rollout(spec, 10_000)  # imports and first calls, not counted
+    ACT_S[0] = 0.0
+    for seed in range(episodes):
+        t0 = time.perf_counter()
+        ep = rollout(spec, seed)
+        wall += time.perf_counter() - t0
+        steps += ep.steps
+        kept += [ep] if ep.success else []
+    act = ACT_S[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        dataset.write(Path(tmp) / "warm", kept[:1], spec.rate_hz, spec.control_mode, ())
+        t0 = time.perf_counter()
+        frames = dataset.write(Path(tmp) / "d", kept, spec.rate_hz, spec.control_mode, ())
+        write = time.perf_counter() - t0
+    per = 1000.0 / steps
+    print(f"{task}: {episodes} episodes recorded by the closed-loop expert on one core, "
+          f"{len(kept)} kept, {steps / episodes:.0f} steps an episode")  # fmt: skip
+    print(f"  a step {wall * per:.2f} ms: the expert's own answer {act * per:.2f} ms "
+          f"({act / wall:.0%}), the environment and the rest {(wall - act) * per:.2f} ms "
+          f"({1 - act / wall:.0%})")  # fmt: skip
+    print(f"  writing (LeRobot's writer): {1000 * write / max(frames, 1):.2f} ms a frame, "
+          f"{write / (wall + write):.0%} of the recording on one core")  # fmt: skip
+    print(f"  {60 * episodes / (wall + write):.1f} episodes a minute on one core, writing included")
+
+
 # --- the table ----------------------------------------------------------------------------
 
 
@@ -241,8 +317,12 @@ def main() -> None:
         choices=["clean", "disturbed"],
         help="which rows of each expert",
     )
+    parser.add_argument("--profile", metavar="TASK", help="where a recording's time goes")
     args = parser.parse_args()
     print(machine())
+    if args.profile:
+        profile(args.profile, args.episodes)
+        return
     print(
         f"{args.episodes} generated problems of {args.blocks[0]} to {args.blocks[1]} blocks "
         f"per row (seeds 0..{args.episodes - 1}); disturbed: {args.disturb_steps} random hand "
