@@ -1070,10 +1070,12 @@ recipe of the recording's task is used (models/scenarios/learning.yaml: policy, 
 steps, batch size, network size); flags override it. --policy mlp is the project's own
 policy (a multilayer perceptron predicting joint offsets in chunks, registered with
 LeRobot as the policy type cake_mlp), act and diffusion are LeRobot's ACT and Diffusion
-Policy. --inputs state reads the joints and observation.environment_state (the cubes'
-poses and the goal); images the joints and the cameras (mlp: a small encoder a camera,
-and the goal without the poses; both train on a CPU, ACT's and Diffusion Policy's
-image encoders are GPU work); both all of them (act, diffusion); skill a learned skill.
+Policy, trained with the recipe's part for them where the recipe trains another policy
+(its act: and diffusion: fields, e.g. a smaller learning rate). --inputs state reads the
+joints and observation.environment_state (the cubes' poses and the goal); images the
+joints and the cameras (mlp: a small encoder a camera, and the goal without the poses;
+both train on a CPU, ACT's and Diffusion Policy's image encoders are GPU work); both all
+of them (act, diffusion); skill a learned skill.
 Nothing is downloaded: the dataset is read from its folder and backbones start from
 scratch unless --weights names a file. The checkpoint is LeRobot's
 (OUT/checkpoints/last/pretrained_model): evaluate it with python -m cake_drake.evaluate
@@ -1149,7 +1151,7 @@ def train_parser() -> argparse.ArgumentParser:
 def main_train(argv: list[str] | None = None) -> int:
     from dataclasses import replace
 
-    from cake_drake.learning.train import for_inputs, recipe_of, train
+    from cake_drake.learning.train import for_inputs, for_policy, recipe_of, train
 
     args = train_parser().parse_args(argv)
     if args.residual:
@@ -1159,9 +1161,8 @@ def main_train(argv: list[str] | None = None) -> int:
                          "(several run folders go with --residual)")  # fmt: skip
     args.dataset = args.dataset[0]
     recipe, report = recipe_of(args.dataset)
-    recipe = for_inputs(recipe, args.inputs)
+    recipe = for_policy(for_inputs(recipe, args.inputs), args.policy)
     given = {
-        "policy": args.policy,
         "steps": args.steps,
         "batch_size": args.batch_size,
     }

@@ -172,6 +172,19 @@ class ImageRecipe:
 
 
 @dataclass
+class PolicyRecipe:
+    """What a task's recipe changes when another of its policies trains (``train --policy
+    act`` on a task whose recipe trains ``mlp``): a transformer or a U-Net wants another
+    learning rate, batch and length than the MLP. Unset fields keep the recipe's."""
+
+    steps: int | None = None
+    batch_size: int | None = None
+    lr: float | None = None
+    chunk_size: int | None = None
+    n_action_steps: int | None = None
+
+
+@dataclass
 class Training:
     """A learning task's recipe for ``python -m cake_drake.train``: LeRobot's policy, what it
     reads, how long it trains and how big its network is (data, not code)."""
@@ -196,6 +209,9 @@ class Training:
     n_obs_steps: int = 1
     #: The recipe's changes when the policy reads the cameras instead of the poses.
     images: ImageRecipe = field(default_factory=ImageRecipe)
+    #: The recipe's changes when ACT or Diffusion Policy trains instead (train --policy).
+    act: PolicyRecipe = field(default_factory=PolicyRecipe)
+    diffusion: PolicyRecipe = field(default_factory=PolicyRecipe)
 
 
 ReferenceConfig = Planned | Recorded | Policy

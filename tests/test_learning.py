@@ -91,6 +91,18 @@ def test_the_learning_tasks_have_equal_cameras_and_a_recipe():
         assert s.training.policy in ("mlp", "act", "diffusion") and s.training.steps > 0
 
 
+def test_a_recipe_field_of_the_wrong_type_is_refused_with_its_line(tmp_path):
+    from cake_drake.scenario import parse_scenario
+
+    text = (LEARNING.read_text() + "\nbad:\n  <<: *task\n  training:\n    <<: *recipe\n"
+            "    act: {lr: fast}\n")  # fmt: skip
+    with pytest.raises(InputError, match=r"learning.yaml:\d+: training.act.lr = .fast. is not a"):
+        parse_scenario(text, str(LEARNING), "bad")
+    with pytest.raises(InputError, match=r"unknown key 'momentum' in training.diffusion"):
+        parse_scenario(text.replace("act: {lr: fast}", "diffusion: {momentum: 0.9}"),
+                       str(LEARNING), "bad")  # fmt: skip
+
+
 # --- what a learner reads ------------------------------------------------------------------
 
 
@@ -220,7 +232,12 @@ def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, po
              "--steps", "2", "--batch-size", "2", "--device", "cpu")  # fmt: skip
     assert r.returncode == 0, r.stderr
     model = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
-    assert json.loads((model / "config.json").read_text())["type"] == policy
+    config = json.loads((model / "config.json").read_text())
+    # The recipe's part for this policy (learning.yaml: its learning rate), the flags over it.
+    part = getattr(load_scenario(LEARNING, "stack2").training, policy)
+    assert config["type"] == policy and config["optimizer_lr"] == part.lr != 1e-3
+    recipe = json.loads((tmp_path / "run" / "train.json").read_text())["recipe"]
+    assert (recipe["policy"], recipe["lr"], recipe["batch_size"]) == (policy, part.lr, 2)
     from cake_drake.learning.checkpoint import make
 
     env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),

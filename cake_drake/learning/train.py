@@ -38,7 +38,7 @@ import numpy as np
 
 from cake_drake.errors import InputError
 from cake_drake.learning import dataset as datasets
-from cake_drake.scenario import ImageRecipe, Training
+from cake_drake.scenario import ImageRecipe, PolicyRecipe, Training
 
 #: ``mlp`` is the project's own state policy, registered with LeRobot as ``cake_mlp``
 #: (:mod:`cake_drake.learning.mlp`); the others are LeRobot's.
@@ -60,11 +60,12 @@ def recipe_of(root: Path) -> tuple[Training, dict]:
             report = {}
     fields = report.get("training") or {}
     known = {k: v for k, v in fields.items() if k in Training.__dataclass_fields__}
-    images = known.pop("images", None)
+    parts = {k: known.pop(k, None) for k in ("images", "act", "diffusion")}
     recipe = Training(**known)
-    if isinstance(images, dict):
-        fields = ImageRecipe.__dataclass_fields__
-        recipe.images = ImageRecipe(**{k: v for k, v in images.items() if k in fields})
+    for name, kind in (("images", ImageRecipe), ("act", PolicyRecipe), ("diffusion", PolicyRecipe)):
+        if isinstance(parts[name], dict):
+            fields = kind.__dataclass_fields__
+            setattr(recipe, name, kind(**{k: v for k, v in parts[name].items() if k in fields}))
     return recipe, report
 
 
@@ -77,6 +78,18 @@ def for_inputs(recipe: Training, inputs: str | None) -> Training:
         part = recipe.images
         return replace(recipe, inputs=inputs, steps=part.steps, batch_size=part.batch_size)
     return replace(recipe, inputs=inputs)
+
+
+def for_policy(recipe: Training, policy: str | None) -> Training:
+    """The recipe for ``policy`` (the recipe's own when None): ACT and Diffusion Policy take
+    the recipe's part for them (``act``, ``diffusion``: steps, batch, learning rate,
+    chunk) when the recipe itself trains another policy; what the part leaves unset, and
+    every other policy, keeps the recipe's."""
+    if policy is None or policy == recipe.policy:
+        return recipe
+    part = getattr(recipe, policy, None) if policy in ("act", "diffusion") else None
+    changes = {k: v for k, v in asdict(part).items() if v is not None} if part else {}
+    return replace(recipe, policy=policy, **changes)
 
 
 def _info(root: Path) -> dict:
