@@ -178,8 +178,15 @@ def test_a_dagger_round_labels_the_learners_states_and_fine_tunes(dagger_run):
     plain = json.loads((folder / "plain" / "report.json").read_text())
     lines = stdout.splitlines()
     assert lines[0].startswith("round 0: mlp trained 2 steps on 2 demonstrations")
-    summary = json.loads((out / "train.json").read_text())["dagger"]
+    made = json.loads((out / "train.json").read_text())
+    summary = made["dagger"]
     (row,) = summary["rounds"]
+    # Where its time went: the rollouts, the datasets written, and both trainings' phases.
+    phases = made["phases_s"]
+    assert phases["rollouts"] > 0 and phases["writing"] > 0 and phases["network"] > 0
+    rounds = [json.loads((out / "rounds" / f"round-{k}" / "train.json").read_text())
+              for k in (0, 1)]  # fmt: skip
+    assert phases["train"] == pytest.approx(sum(r["phases_s"]["train"] for r in rounds), abs=2e-3)
     added, by_learner = row["frames_added"], row["learner_frames"]
     assert 0 < by_learner < added  # both acted (beta 0.5)
     assert row["expert_labelled_frames"] == plain["frames"] + added

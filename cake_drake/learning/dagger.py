@@ -33,6 +33,7 @@ import json
 import math
 import shutil
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -169,6 +170,7 @@ def dagger(
     teacher = Teacher(spec.policy, dict(spec.options), float(beta))
     threads = 1 if (ray is not None or workers > 1) else 0
     kept_files, kept_rows, table, by_learner = [], [], [], 0
+    phases = {"rollouts": 0.0, "writing": 0.0}  # seconds; the trainings' are added at the end
     for k in range(1, rounds + 1):
         learner = replace(
             spec,
@@ -180,9 +182,10 @@ def dagger(
         )  # fmt: skip
         seeds = [first + (k - 1) * per_round + j for j in range(per_round)]
         jobs = [(learner, s, teacher, threads) for s in seeds]
-        rows = {}
+        rows, t0 = {}, time.perf_counter()
         for ep in imap(_rollout_one, jobs, workers, ray):
             rows[ep.seed] = (_keep(ep, out / "rollouts", failed_too=True), ep)
+        phases["rollouts"] += time.perf_counter() - t0
         added = learner_frames = wins = 0
         for s in seeds:
             row, ep = rows[s]
@@ -195,7 +198,7 @@ def dagger(
             learner_frames += int(np.sum(ep.actors == LEARNER_ACTED))
         labelled += added
         by_learner += learner_frames
-        data = out / "data" / f"round-{k}"
+        data, t0 = out / "data" / f"round-{k}", time.perf_counter()
         frames = dataset.write(
             data,
             _episodes(demo_files + kept_files, demo_rows + kept_rows),
@@ -211,6 +214,7 @@ def dagger(
             "dagger": {"round": k, "beta": beta, "learner_frames": by_learner,
                        "seeds": [r["seed"] for r in kept_rows]},
         }, indent=2) + "\n")  # fmt: skip
+        phases["writing"] += time.perf_counter() - t0
         steps = round_steps or recipe.steps
         with contextlib.redirect_stdout(sys.stderr):
             checkpoint = training.train(data, out / "rounds" / f"round-{k}",
@@ -233,10 +237,15 @@ def dagger(
             f"{wins}/{per_round} (beta {beta:g}); fine-tuned {steps} steps")  # fmt: skip
     shutil.copytree(out / "rounds" / f"round-{rounds}" / "checkpoints", out / "checkpoints",
                     symlinks=True)  # fmt: skip
+    for k in range(rounds + 1):  # each training's own phases (train.json), added up
+        trained = json.loads((out / "rounds" / f"round-{k}" / "train.json").read_text())
+        for name, seconds in trained.get("phases_s", {}).items():
+            phases[name] = phases.get(name, 0.0) + seconds
     summary = {
         "dataset": str(root),
         "recipe": asdict(recipe),
         "seed": seed,
+        "phases_s": {k: round(v, 3) for k, v in phases.items()},
         "dagger": {
             "rounds": table,
             "beta": beta,
