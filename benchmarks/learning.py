@@ -61,6 +61,7 @@ replans rescued an episode.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import subprocess
@@ -172,8 +173,10 @@ def recorded(task: str, episodes: int, work: Path, noise: float = 0.0) -> Path:
     return data
 
 
+@functools.cache
 def recipe(task: str) -> dict:
-    """``task``'s training recipe as learning.yaml has it now."""
+    """``task``'s training recipe as learning.yaml had it the first time it was asked (read
+    once: an edit of the file while the benchmark runs changes nothing mid-table)."""
     from dataclasses import asdict
 
     from cake_drake.scenario import load_scenario
