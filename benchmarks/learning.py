@@ -184,11 +184,18 @@ def recipe(task: str) -> dict:
     return asdict(load_scenario(LEARNING, task).training)
 
 
-def recipe_tag(task: str) -> str:
+def recipe_tag(task: str, policy: str | None = None) -> str:
     """A recipe's length, in the names of what is trained with it (a recipe changed in
-    learning.yaml trains anew)."""
+    learning.yaml trains anew); for a policy the recipe trains through its part (ACT,
+    Diffusion Policy), that part's batch, learning rate and denoising passes too."""
     r = recipe(task)
-    return f"steps{r['steps']}_batch{r['batch_size']}"
+    tag = f"steps{r['steps']}_batch{r['batch_size']}"
+    part = r.get(policy) if policy in ("act", "diffusion") and policy != r["policy"] else None
+    if part:
+        tag = f"steps{part['steps'] or r['steps']}_batch{part['batch_size'] or r['batch_size']}"
+        tag += f"_lr{part['lr']:g}" if part["lr"] else ""
+        tag += f"_ddim{part['inference_steps']}" if part.get("inference_steps") else ""
+    return tag
 
 
 def demonstrations(task: str, demos: int, work: Path) -> Path:
@@ -204,7 +211,7 @@ def trained(task: str, policy: str, demos: int, work: Path) -> tuple[Path, dict]
     """The checkpoint of ``policy`` on ``demos`` demonstrations of ``task`` (made if absent),
     and the training's figures."""
     data = demonstrations(task, demos, work)
-    run = work / f"{task}_{policy}_demos{demos}_{recipe_tag(task)}"
+    run = work / f"{task}_{policy}_demos{demos}_{recipe_tag(task, policy)}"
     return run, train_once(data, run, policy)
 
 
@@ -215,8 +222,12 @@ def subset(pool: Path, out: Path, frames: int | None = None, seeds_below: int | 
     from cake_drake.learning import dataset
     from cake_drake.learning.recording import _load
 
-    if (out / "report.json").is_file():
-        return json.loads((out / "report.json").read_text())
+    if (out / "report.json").is_file():  # its episodes as made; the recipe as it is now
+        report = json.loads((out / "report.json").read_text())
+        if report.get("training") != recipe(report["task"]):
+            report["training"] = recipe(report["task"])
+            (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+        return report
     report = json.loads((pool / "report.json").read_text())
     rows, total = [], 0
     for seed in sorted(report["seeds"]):

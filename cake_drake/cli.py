@@ -1035,6 +1035,8 @@ def main_evaluate(argv: list[str] | None = None) -> int:
                               out.path("failures.png"))  # fmt: skip
         keys = ["seed", "blocks", "success", "steps", "wall_s", "reason", "task"]
         keys += ["repeats", "replans"] if skills else ["missing"]
+        for r in rows if not skills else ():  # a column of text: "(on a b) (on b c)"
+            r["missing"] = " ".join(r["missing"])
         out.path("results.parquet"), out.path("results.csv")  # declared, written below
         write_table(sorted(rows, key=lambda r: r["seed"]), out.staging, keys, exact=True)
         out.write_json("summary.json", summary)
@@ -1247,7 +1249,8 @@ def _failures_picture(rows: list[dict], frames: list, path: Path) -> None:
         ax.axis("off")
     for ax, row, frame in zip(axes.flat, rows, frames, strict=False):
         ax.imshow(frame)
-        said = (f"seed {row['seed']}: {row['reason']}", f"missing {row['missing'] or 'nothing'}")
+        missing = " ".join(row["missing"]) or "nothing"
+        said = (f"seed {row['seed']}: {row['reason']}", f"missing {missing}")
         ax.set_title("\n".join(line for s in said for line in textwrap.wrap(s, 48)), fontsize=8)
     fig.tight_layout()
     fig.savefig(path)

@@ -333,6 +333,7 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
             q_start,
             list(cameras),
             task,
+            act_budget_s=ref.act_budget_s,
         ),
     )
     plant = scene.plant

@@ -326,6 +326,7 @@ def check_policy(ref: Policy, cameras=()) -> None:
     check_space(ref.action_space, ref.options)
     _range(ref.rate_hz, 0.5, 100.0, "reference.rate_hz", " Hz")
     _range(ref.max_steps, 0, 1_000_000, "reference.max_steps")
+    _range(ref.act_budget_s, 0.1, 3600.0, "reference.act_budget_s", " s")
 
 
 #: Every file a run may write to its output folder.

@@ -155,6 +155,10 @@ class Policy:
     #: cake_drake.train`` (or any LeRobot checkpoint folder), run through its processors.
     checkpoint: str = ""
     device: str = "auto"  # where a checkpoint runs: auto | cpu | cuda
+    #: Wall-clock budget (s) of one answer of the policy: one that takes longer ends the
+    #: run or the episode (exit 3). A Diffusion Policy's 100 denoising passes on a busy
+    #: CPU want more than the default.
+    act_budget_s: float = 30.0
 
 
 @dataclass
@@ -182,6 +186,7 @@ class PolicyRecipe:
     lr: float | None = None
     chunk_size: int | None = None
     n_action_steps: int | None = None
+    inference_steps: int | None = None
 
 
 @dataclass
@@ -207,6 +212,9 @@ class Training:
     n_action_steps: int = 10
     #: Observations the MLP reads at once: the current one and those before it (mlp).
     n_obs_steps: int = 1
+    #: Diffusion Policy's denoising passes an answer: 0, all of its 100 training steps
+    #: (DDPM); fewer, evenly spaced with DDIM (10 answer ten times as fast).
+    inference_steps: int = 0
     #: The recipe's changes when the policy reads the cameras instead of the poses.
     images: ImageRecipe = field(default_factory=ImageRecipe)
     #: The recipe's changes when ACT or Diffusion Policy trains instead (train --policy).

@@ -238,6 +238,10 @@ def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, po
     assert config["type"] == policy and config["optimizer_lr"] == part.lr != 1e-3
     recipe = json.loads((tmp_path / "run" / "train.json").read_text())["recipe"]
     assert (recipe["policy"], recipe["lr"], recipe["batch_size"]) == (policy, part.lr, 2)
+    if policy == "diffusion":  # trained on every noise level, answers with DDIM's few
+        assert config["num_train_timesteps"] == 100
+        assert (config["noise_scheduler_type"], config["num_inference_steps"]) == (
+            "DDIM", part.inference_steps) and 0 < part.inference_steps < 100  # fmt: skip
     from cake_drake.learning.checkpoint import make
 
     env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
@@ -349,6 +353,11 @@ def test_a_dataset_without_the_features_a_policy_needs_is_refused(trained, tmp_p
     one_line(r, 2, "--steps 0: a whole number, 1 to 10000000")
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--batch-size", "4000")
     one_line(r, 2, "--batch-size 4000: larger than")
+    report = json.loads((ds / "report.json").read_text())
+    report["training"]["diffusion"] = {"inference_steps": 200}
+    (ds / "report.json").write_text(json.dumps(report))
+    r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--policy", "diffusion")
+    one_line(r, 2, "training.inference_steps 200: a whole number, 0 (all of")
     info = json.loads((ds / "meta" / "info.json").read_text())
     (ds / "meta" / "info.json").write_text(json.dumps({**info, "total_frames": 10**10}))
     r = cake("train", str(ds), "--out", str(tmp_path / "o"), "--batch-size", "4")
@@ -494,6 +503,23 @@ def test_a_bad_policy_on_two_workers_is_one_line_with_its_exit_code(tmp_path):
         env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
     )  # fmt: skip
     one_line(r, 3, "policy 'bad:make' returned a tuple of 1")
+
+
+def _torch_threads(job):
+    import torch
+
+    return {"seed": job[1], "threads": torch.get_num_threads(), "pid": os.getpid()}
+
+
+def test_workers_share_the_cores_as_torchs_threads():
+    """Two episode workers on this machine's cores: each torch gets its share, not every
+    core (a Diffusion Policy's answer was several times slower oversubscribed)."""
+    from cake_drake.learning.parallel import map_ordered
+
+    rows = map_ordered(_torch_threads, [(None, 1), (None, 2)], workers=2)
+    share = max(1, len(os.sched_getaffinity(0)) // 2)
+    assert [r["threads"] for r in rows] == [share, share]
+    assert os.getpid() not in {r["pid"] for r in rows}
 
 
 def test_make_vec_runs_the_environment_in_two_processes():

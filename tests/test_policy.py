@@ -124,6 +124,15 @@ def maybe_done():
 
 def a_dict():
     return Bad(lambda o: {"dx": 0.0})
+
+
+def slow():
+    import time
+
+    def think(o):
+        time.sleep(2.0)
+        return np.zeros(7)
+    return Bad(think)
 """
 
 
@@ -165,6 +174,8 @@ def test_a_bad_policy_is_one_line_and_exit_3(tmp_path, factory, words):
          "action_space 'fly'; choose one of: joint_position, ee_delta, joint_chunk"),
         ("reference: !Policy {factory: examples.expert_policy:make, rate_hz: 0}",
          "reference.rate_hz = 0.0 is outside"),
+        ("reference: !Policy {factory: examples.expert_policy:make, act_budget_s: 0}",
+         "reference.act_budget_s = 0.0 is outside"),
         ("reference: !Policy {factory: examples.expert_policy:make, action_space: joint_chunk,"
          " options: {horizon: 4, execute: 9}}", "1 <= execute <= horizon"),
         ("reference: !Policy {factory: examples.expert_policy:make, action_space: joint_chunk,"
@@ -212,6 +223,36 @@ def test_a_bad_answer_names_the_users_policy_in_record_and_evaluate(
     assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
     assert f"policy '{factory}'" in r.stderr and words in r.stderr, r.stderr
     assert "HeldAction" not in r.stderr
+
+
+@pytest.mark.parametrize("command", ["run", "record", "evaluate"])
+def test_a_policy_past_the_scenarios_budget_for_one_answer_is_one_line_and_exit_3(
+    tmp_path, command
+):
+    """``reference.act_budget_s`` is the budget of one ``act`` wherever the policy runs:
+    the Diagram (run), and the Gym episodes of record and evaluate."""
+    (tmp_path / "bad.py").write_text(BAD)
+    (tmp_path / "s.yaml").write_text(
+        "task: {generate: {blocks: 2}}\n"
+        "reference: !Policy {factory: bad:slow, action_space: ee_delta, max_steps: 5,"
+        " act_budget_s: 0.5}\n"
+    )
+    args = ["--out", "o", "--episodes", "1", "--workers", "1"]
+    args = {
+        "run": ["--scenario", "s.yaml", "--out", "o", "--quiet"],
+        "record": ["s.yaml", *args],
+        "evaluate": ["bad:slow", "--suite", "s.yaml", *args],
+    }[command]
+    r = subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{command}", *args],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
+    )  # fmt: skip
+    assert r.returncode == 3, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    assert "policy 'bad:slow' overran its budget of 0.5 s" in r.stderr, r.stderr
+    if command != "record":  # a recording keeps the episodes that finished: none here
+        assert not (tmp_path / "o").exists()
 
 
 # --- Gymnasium -------------------------------------------------------------------------------

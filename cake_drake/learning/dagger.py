@@ -99,11 +99,7 @@ def source(root: Path) -> tuple[dict, EpisodeSpec, list[Path]]:
 
 def _rollout_one(args):
     """One DAgger episode (in a worker): the learner acts, the teacher labels."""
-    spec, seed, teacher, threads = args
-    if threads:
-        import torch
-
-        torch.set_num_threads(threads)
+    spec, seed, teacher = args
     return rollout(spec, seed, record=True, teacher=teacher)
 
 
@@ -168,7 +164,6 @@ def dagger(
     log(f"round 0: {recipe.policy} trained {recipe.steps} steps on {len(demo_files)} "
         f"demonstrations ({labelled} expert-labelled frames)")  # fmt: skip
     teacher = Teacher(spec.policy, dict(spec.options), float(beta))
-    threads = 1 if (ray is not None or workers > 1) else 0
     kept_files, kept_rows, table, by_learner = [], [], [], 0
     phases = {"rollouts": 0.0, "writing": 0.0}  # seconds; the trainings' are added at the end
     for k in range(1, rounds + 1):
@@ -181,7 +176,7 @@ def dagger(
             noise=0.0,
         )  # fmt: skip
         seeds = [first + (k - 1) * per_round + j for j in range(per_round)]
-        jobs = [(learner, s, teacher, threads) for s in seeds]
+        jobs = [(learner, s, teacher) for s in seeds]
         rows, t0 = {}, time.perf_counter()
         for ep in imap(_rollout_one, jobs, workers, ray):
             rows[ep.seed] = (_keep(ep, out / "rollouts", failed_too=True), ep)

@@ -75,7 +75,7 @@ def evaluate(
         # Where the failures stopped: how often each goal fact was missing at their end.
         "missing_at_end": dict(
             Counter(
-                f for r in rows if not r["success"] for f in _facts(r.get("missing", ""))
+                f for r in rows if not r["success"] for f in r.get("missing", ())
             ).most_common()
         ),
     }
@@ -89,7 +89,3 @@ def evaluate(
         }
     return rows, summary
 
-
-def _facts(text: str) -> list[str]:
-    """``"(on a b) (on-table c)"`` -> ``["(on a b)", "(on-table c)"]``."""
-    return [f"({f.strip(' ()')})" for f in text.split(")") if f.strip(" (")]

@@ -71,6 +71,7 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
             max_steps=ref.max_steps,
             policy=ref.factory or EXPERT,
             options={k: v for k, v in (ref.options or {}).items()},
+            act_budget_s=ref.act_budget_s,
         )
     if policy:
         spec = replace(spec, policy=policy, options=spec.action_options())
@@ -239,8 +240,7 @@ def _load(path: Path, row: dict, images: bool = True) -> Episode:
         skills, grounds = _skill_frames(z, len(actions))
         return Episode(
             row["seed"], row["success"], row["reason"], row["steps"], row["wall_s"],
-            str(z["task"]), row["blocks"], row.get("missing", ""), z["states"],
-            z["environment"], actions, frames,
+            str(z["task"]), row["blocks"], (), z["states"], z["environment"], actions, frames,
             np.zeros(len(actions), np.int64) if actors is None else actors, executed,
             skills, grounds,
         )  # fmt: skip
@@ -291,6 +291,7 @@ def _spec_from_json(d: dict) -> EpisodeSpec:
         options=d["options"],
         placement=tuple(d.get("placement", (0.0, 0.0))),
         noise=float(d.get("noise", 0.0)),
+        act_budget_s=float(d.get("act_budget_s", 30.0)),
     )
 
 

@@ -36,8 +36,6 @@ from cake_drake.plugins import DURING, guarded
 
 #: The policy the recordings use unless another is named: the classical cake as a policy.
 EXPERT = "cake_drake.learning.expert:make"
-#: Wall-clock budget of one answer of a policy plug-in (s).
-ACT_BUDGET_S = 30.0
 #: Who acted at a frame (the dataset's ``actor``): the labelling policy, or a learner.
 EXPERT_ACTED, LEARNER_ACTED = 0, 1
 #: The largest noise (``--noise``) each action space takes, in the units of
@@ -93,6 +91,7 @@ class EpisodeSpec:
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
     placement: tuple[float, float] = (0.0, 0.0)  # world.placement: xy (m), yaw (degrees)
     noise: float = 0.0  # DART: noise added to the executed action (units: noise_scale)
+    act_budget_s: float = 30.0  # wall-clock budget of one answer of the policy (s)
 
     def env(self, render_mode: str | None = None):
         from cake_drake.learning.env import StackEnv
@@ -149,7 +148,7 @@ class Episode:
     wall_s: float
     task: str = ""  # the instruction in English
     blocks: int = 0
-    missing: str = ""  # the goal's facts not measured true at the end, e.g. "(on b a)"
+    missing: tuple[str, ...] = ()  # the goal's facts not true at the end, e.g. "(on b a)"
     states: np.ndarray | None = None  # (T, 8) float32
     environment: np.ndarray | None = None  # (T, 240) float32: observation.environment_state
     actions: np.ndarray | None = None  # (T, A) float32
@@ -174,7 +173,7 @@ def _answer(policy, label: str, obs, spec: EpisodeSpec, kin, counts):
     """``policy``'s answer to ``obs``: (its action checked and clipped, or None; done)."""
     from cake_drake.policy import spaces
 
-    answer = guarded(label, policy.act, obs, exit_code=DURING, budget_s=ACT_BUDGET_S)
+    answer = guarded(label, policy.act, obs, exit_code=DURING, budget_s=spec.act_budget_s)
     action, done = spaces.read_answer(answer, label)
     if action is not None:
         options = spec.action_options()
@@ -263,7 +262,7 @@ def rollout(
         reason = f"the policy said done: {ender.reason}"
     ep = Episode(
         seed, bool(info["is_success"]), reason, steps, time.perf_counter() - t0,
-        info["task"], len(info["cubes"]), " ".join(info["missing"]),
+        info["task"], len(info["cubes"]), tuple(info["missing"]),
     )  # fmt: skip
     if final_frame and not ep.success:
         ep.final = env.render()

@@ -222,6 +222,11 @@ def check(
         raise InputError(
             f"--inputs skill trains --policy mlp (a learned skill), not {recipe.policy}"
         )
+    if not (isinstance(recipe.inference_steps, int) and 0 <= recipe.inference_steps <= 100):
+        raise InputError(
+            f"training.inference_steps {recipe.inference_steps!r}: a whole number, 0 (all of "
+            "Diffusion Policy's 100) to 100"
+        )
     if not 1 <= recipe.n_action_steps <= recipe.chunk_size:
         raise InputError(
             f"training.n_action_steps {recipe.n_action_steps}: 1 to chunk_size "
@@ -301,6 +306,9 @@ def _policy_config(recipe: Training, device: str, weights: str | None):
         n_action_steps=min(recipe.n_action_steps, horizon - 1),
         optimizer_lr=recipe.lr,
         crop_shape=None,
+        # Trained on all 100 noise levels either way; DDIM answers with fewer passes.
+        noise_scheduler_type="DDIM" if recipe.inference_steps else "DDPM",
+        num_inference_steps=recipe.inference_steps or None,
     )
 
 

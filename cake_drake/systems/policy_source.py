@@ -47,9 +47,6 @@ from cake_drake.policy.observations import Observation, environment_state, goal_
 from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports
 from cake_drake.world.facts import GoalReading, read_goal
 
-#: Wall-clock budget (s) of one call to a policy's ``act``.
-ACT_BUDGET_S = 30.0
-
 
 @dataclass
 class PolicyTask:
@@ -99,6 +96,7 @@ class PolicySource(LeafSystem):
         cameras: Sequence[str],
         task: PolicyTask,
         stop_at_goal: bool = True,
+        act_budget_s: float | None = 30.0,
     ) -> None:
         super().__init__()
         #: End the policy's run when the measured world shows the goal (as the Gym env's
@@ -116,8 +114,9 @@ class PolicySource(LeafSystem):
         self.last_action: np.ndarray | None = None
         self._chunk: deque = deque()
         self._observed: tuple | None = None
-        #: A policy may carry its own per-call budget (s); None: none (the Gym env's own).
-        self._budget_s = getattr(policy, "act_budget_s", ACT_BUDGET_S)
+        #: Wall-clock budget (s) of one call to ``act`` (the scenario's); a policy may carry
+        #: its own, None: none (the Gym env's adapter, which only hands over a step).
+        self._budget_s = getattr(policy, "act_budget_s", act_budget_s)
         self._box = spaces.bounds(space, self.options, *limits)  # the action's (low, high)
         self._desired, self._fingers = np.zeros(14), np.zeros(4)
         self._count, self._labels = np.zeros(1), np.zeros(2)
