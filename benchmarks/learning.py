@@ -29,6 +29,10 @@ and blocks3), then the total time: this run's (cached rows are not redone) and t
 table's from nothing (the sum of every recording, training and evaluation it used, as
 long as each took when it was made).
 
+``--jobs N`` trains N rows side by side (their datasets made first), and runs N
+comparisons side by side. ``train`` gives the network every core but one, so on two
+cores one training leaves a core idle: the default is 2 there, 1 on larger machines.
+
 ``--compare``: BC, DART and DAgger at equal numbers of expert-labelled frames, per task.
 DAgger records ``--start-demos`` demonstrations and runs ``--rounds`` rounds of
 ``--per-round`` rollouts (``train --dagger``, ``--beta``); BC then trains on the first
@@ -296,8 +300,8 @@ def pixels(args) -> None:
                 print(f"{row(label, s, made)}  batch {batch}, peak {peak}", flush=True)
 
 
-def compare(task: str, policy: str, args) -> None:
-    """BC, DART and DAgger rows of ``task`` at equal expert-labelled frames."""
+def compare(task: str, policy: str, args) -> list[str]:
+    """BC, DART and DAgger rows of ``task`` at equal expert-labelled frames (its lines)."""
     steps = ["--steps", str(args.steps)] if args.steps else []
     length = f"steps{args.steps}" if args.steps else recipe_tag(task)
     start = demonstrations(task, args.start_demos, args.work)
@@ -323,17 +327,18 @@ def compare(task: str, policy: str, args) -> None:
         runs.append((label, trained_run, report["frames"], train_once(data, trained_run, policy,
                      *steps), extra))  # fmt: skip
     runs.append(("DAgger", run, frames, figures, dagger))
+    lines = []
     for label, trained_run, labelled, made, extra in runs:
         s = evaluate(task, str(trained_run), trained_run / "evaluation", args.episodes,
                      args.eval_seed)  # fmt: skip
         lo, hi = wilson(s["success"], s["episodes"])
-        print(
+        lines.append(
             f"  {label + ', ' + policy:<14} {labelled:>7} frames  {s['success']:>3}/"
             f"{s['episodes']:<3} {s['rate']:>5.0%}  [{lo:4.0%}, {hi:4.0%}]  "
-            f"train {made['train_s'] / 60:5.1f} min  {extra}",
-            flush=True,
+            f"train {made['train_s'] / 60:5.1f} min  {extra}"
         )
-        print(failures(s), flush=True)
+        lines.append(failures(s))
+    return lines
 
 
 def skills(args) -> None:
@@ -418,6 +423,10 @@ def main() -> None:
     p.add_argument("--work", type=Path, default=ROOT / "outputs" / "learning_benchmark")
     p.add_argument("--compare", action="store_true", help="BC, DART, DAgger at equal labels")
     p.add_argument("--all", action="store_true", help="the whole table of docs/learning.md")
+    p.add_argument(
+        "--jobs", type=int, default=trainings_at_once(),
+        help="trainings side by side (default: 2 on two cores, where one uses one core)",
+    )  # fmt: skip
     p.add_argument("--start-demos", type=int, default=20, help="DAgger's demonstrations")
     p.add_argument("--rounds", type=int, default=4, help="DAgger's rounds")
     p.add_argument("--per-round", type=int, default=20, help="DAgger's rollouts a round")
@@ -465,10 +474,15 @@ def main() -> None:
 def comparison(args, tasks, policies) -> None:
     print(f"  {'method':<14} {'labelled':>13}  {'success':>7} {'rate':>5}  "
           f"{'95 % interval':<13}")  # fmt: skip
-    for task in tasks:
-        print(task)
-        for policy in policies:
-            compare(task, policy, args)
+    for task in tasks:  # the pools, before the comparisons share them
+        recorded(task, args.start_demos, args.work)
+    pairs = [(task, policy) for task in tasks for policy in policies]
+    made = at_once(args.jobs, [functools.partial(compare, task, policy, args)
+                               for task, policy in pairs])  # fmt: skip
+    for k, ((task, _), lines) in enumerate(zip(pairs, made, strict=True)):
+        if k == 0 or pairs[k - 1][0] != task:
+            print(task)
+        print("\n".join(lines), flush=True)
 
 
 def table(args, tasks, policies, demos_list, baselines: bool = True) -> None:
@@ -482,13 +496,34 @@ def table(args, tasks, policies, demos_list, baselines: bool = True) -> None:
             spec = policy or load_scenario(LEARNING, task).reference.factory
             s = evaluate(task, spec, args.work / f"{task}_{name}", args.episodes, args.eval_seed)
             print(row(name, s), flush=True)
-        for policy in policies:
-            for demos in demos_list:
-                run, figures = trained(task, policy, demos, args.work)
-                s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
-                print(row(f"{policy}, {demos} demos (state)", s, figures), flush=True)
-                print(profile(figures, s), flush=True)
-                print(failures(s), flush=True)
+        rows = [(policy, demos) for policy in policies for demos in demos_list]
+        for demos in sorted(set(demos_list)):  # the datasets, before trainings share them
+            demonstrations(task, demos, args.work)
+        made = at_once(args.jobs, [functools.partial(trained, task, policy, demos, args.work)
+                                   for policy, demos in rows])  # fmt: skip
+        for (policy, demos), (run, figures) in zip(rows, made, strict=True):
+            s = evaluate(task, str(run), run / "evaluation", args.episodes, args.eval_seed)
+            print(row(f"{policy}, {demos} demos (state)", s, figures), flush=True)
+            print(profile(figures, s), flush=True)
+            print(failures(s), flush=True)
+
+
+def trainings_at_once() -> int:
+    """How many trainings the cores take side by side: ``train`` gives the network every
+    core but one, so on two cores a training leaves one idle for another."""
+    cores = len(os.sched_getaffinity(0))
+    return max(1, cores // max(1, cores - 1))
+
+
+def at_once(jobs: int, calls: list) -> list:
+    """Each of ``calls``' answers, in order, ``jobs`` of them running at a time (each runs
+    its command in a process of its own)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if jobs <= 1 or len(calls) <= 1:
+        return [call() for call in calls]
+    with ThreadPoolExecutor(jobs) as pool:
+        return list(pool.map(lambda call: call(), calls))
 
 
 def everything(args) -> None:

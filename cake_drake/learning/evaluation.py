@@ -74,9 +74,7 @@ def evaluate(
         "reasons": dict(Counter(r["reason"] for r in rows)),
         # Where the failures stopped: how often each goal fact was missing at their end.
         "missing_at_end": dict(
-            Counter(
-                f for r in rows if not r["success"] for f in r.get("missing", ())
-            ).most_common()
+            Counter(f for r in rows if not r["success"] for f in r.get("missing", ())).most_common()
         ),
     }
     if rows and "repeats" in rows[0]:  # under the planner: what the monitor's loop did
@@ -88,4 +86,3 @@ def evaluate(
             "replans": int(sum(r["replans"] for r in rows)),
         }
     return rows, summary
-
