@@ -214,15 +214,22 @@ def test_a_bad_answer_names_the_users_policy_in_record_and_evaluate(
     args = ["--out", "o", "--episodes", "1", "--workers", "1"]
     args = ["s.yaml", "--policy", factory, *args] if command == "record" else [factory,
             "--suite", "s.yaml", *args]  # fmt: skip
+    r = failed_in(tmp_path, command, *args)
+    assert f"policy '{factory}'" in r.stderr and words in r.stderr, r.stderr
+    assert "HeldAction" not in r.stderr
+
+
+def failed_in(folder: Path, command: str, *args: str) -> subprocess.CompletedProcess:
+    """``python -m cake_drake.COMMAND ARGS`` run in ``folder`` (its modules importable),
+    checked to have ended in one line with exit 3."""
     r = subprocess.run(
         [sys.executable, "-m", f"cake_drake.{command}", *args],
-        capture_output=True, text=True, timeout=300, cwd=tmp_path,
-        env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
+        capture_output=True, text=True, timeout=300, cwd=folder,
+        env={**os.environ, "PYTHONPATH": f"{folder}{os.pathsep}{ROOT}"},
     )  # fmt: skip
     assert r.returncode == 3, r.stderr
     assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
-    assert f"policy '{factory}'" in r.stderr and words in r.stderr, r.stderr
-    assert "HeldAction" not in r.stderr
+    return r
 
 
 @pytest.mark.parametrize("command", ["run", "record", "evaluate"])
@@ -243,13 +250,7 @@ def test_a_policy_past_the_scenarios_budget_for_one_answer_is_one_line_and_exit_
         "record": ["s.yaml", *args],
         "evaluate": ["bad:slow", "--suite", "s.yaml", *args],
     }[command]
-    r = subprocess.run(
-        [sys.executable, "-m", f"cake_drake.{command}", *args],
-        capture_output=True, text=True, timeout=300, cwd=tmp_path,
-        env={**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{ROOT}"},
-    )  # fmt: skip
-    assert r.returncode == 3, r.stderr
-    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
+    r = failed_in(tmp_path, command, *args)
     assert "policy 'bad:slow' overran its budget of 0.5 s" in r.stderr, r.stderr
     if command != "record":  # a recording keeps the episodes that finished: none here
         assert not (tmp_path / "o").exists()
