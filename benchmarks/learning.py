@@ -29,8 +29,8 @@ and blocks3), then the total time: this run's (cached rows are not redone) and t
 table's from nothing (the sum of every recording, training and evaluation it used, as
 long as each took when it was made).
 
-``--jobs N`` trains N rows side by side (their datasets made first), and runs N
-comparisons side by side. ``train`` gives the network every core but one, so on two
+``--jobs N`` trains N rows side by side (their datasets made first), a comparison's BC
+and DART, and runs N comparisons side by side. ``train`` gives the network every core but one, so on two
 cores one training leaves a core idle: the default is 2 there, 1 on larger machines.
 
 ``--compare``: BC, DART and DAgger at equal numbers of expert-labelled frames, per task.
@@ -314,7 +314,7 @@ def compare(task: str, policy: str, args) -> list[str]:
     figures = train_once(start, run, policy, *steps, *flags)
     frames = figures["dagger"]["expert_labelled_frames"]
     dagger = f"{args.start_demos} demos + {args.rounds} x {args.per_round}, beta {args.beta:g}"
-    runs = []
+    runs, trainings = [], []
     for label, noise in (("BC", 0.0), ("DART", args.noise)):
         pool = recorded(task, args.pool, args.work, noise)
         tag = f"{task}_{label.lower()}{noise:g}_frames{frames}"
@@ -324,8 +324,10 @@ def compare(task: str, policy: str, args) -> list[str]:
         extra = f"{report['episodes']} demos" + (f", noise {noise:g}" if noise else "")
         if report["frames"] < frames:
             extra += f" (all the pool has: --pool {args.pool} is short)"
-        runs.append((label, trained_run, report["frames"], train_once(data, trained_run, policy,
-                     *steps), extra))  # fmt: skip
+        runs.append((label, trained_run, report["frames"], extra))
+        trainings.append(functools.partial(train_once, data, trained_run, policy, *steps))
+    made = at_once(args.jobs, trainings)  # BC and DART side by side
+    runs = [(label, r, n, m, extra) for (label, r, n, extra), m in zip(runs, made, strict=True)]
     runs.append(("DAgger", run, frames, figures, dagger))
     lines = []
     for label, trained_run, labelled, made, extra in runs:
