@@ -17,6 +17,7 @@ import gymnasium
 import numpy as np
 import pytest
 
+from cake_drake.learning.rollout import EXPERT as CLOSED_LOOP
 from cake_drake.learning.rollout import NOISE_MAX, EpisodeSpec, noise_scale, rollout
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -169,6 +170,19 @@ def dagger_run(recordings):
     return folder, out, r.stdout
 
 
+def test_the_expert_gives_up_after_its_repairs_unless_unbounded():
+    from cake_drake.learning.expert import MAX_REPAIRS, ClosedLoopExpert
+
+    bounded, unbounded = ClosedLoopExpert(), ClosedLoopExpert(max_repairs=None)
+    for expert in (bounded, unbounded):
+        expert.repairs = 0  # as reset() leaves it
+    assert [bounded._repair("drop", "off", k) for k in range(MAX_REPAIRS + 1)] == [True] * (
+        MAX_REPAIRS) + [False]  # fmt: skip
+    assert bounded.reason.startswith(f"gave up after {MAX_REPAIRS} repairs; the last: off")
+    assert all(unbounded._repair("drop", "off", k) for k in range(10 * MAX_REPAIRS))
+    assert unbounded.reason is None
+
+
 @pytest.mark.slow
 def test_a_dagger_round_labels_the_learners_states_and_fine_tunes(dagger_run):
     from cake_drake.learning.checkpoint import make
@@ -203,6 +217,10 @@ def test_a_dagger_round_labels_the_learners_states_and_fine_tunes(dagger_run):
     actors = np.asarray(table["actor"]).ravel()
     assert data.num_episodes == plain["episodes"] + 1 and len(actors) == plain["frames"] + added
     assert not actors[: plain["frames"]].any() and actors[plain["frames"] :].sum() == by_learner
+    # The classical teacher never gives up on a learner's states: its repairs are unbounded.
+    assert summary["teacher"] == {"policy": CLOSED_LOOP, "options": {"max_repairs": None}}
+    rollout = json.loads((out / "rollouts" / f"ep_{first}.json").read_text())
+    assert "gave up" not in rollout["reason"], rollout
     with np.load(out / "rollouts" / f"ep_{first}.npz") as z:
         expert_acted = z["actors"] == 0
         assert np.array_equal(z["executed"][expert_acted], z["actions"][expert_acted])

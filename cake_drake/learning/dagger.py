@@ -12,7 +12,8 @@ cloning, :func:`cake_drake.learning.train.train`), then, each round:
 2. labels every visited state with the recording's demonstrator (the closed-loop expert,
    :mod:`cake_drake.learning.expert`, by default), asked at every step on the real
    observation; an episode ends where the expert is done (the goal, or no plan from the
-   measured state), or where the task's step budget runs out;
+   measured state; the closed-loop expert's repairs are unbounded here, since the
+   learner's drift is not its failure), or where the task's step budget runs out;
 3. writes a new LeRobot dataset, ``OUT/data/round-K``: the recording's kept episodes
    (``DATASET/episodes/ep_SEED.npz``) and every DAgger episode so far (kept in
    ``OUT/rollouts/``), each frame's ``actor`` saying who acted (0 the expert, 1 the
@@ -42,7 +43,7 @@ import numpy as np
 
 from cake_drake.errors import InputError
 from cake_drake.learning.parallel import imap
-from cake_drake.learning.rollout import LEARNER_ACTED, EpisodeSpec, Teacher, rollout
+from cake_drake.learning.rollout import EXPERT, LEARNER_ACTED, EpisodeSpec, Teacher, rollout
 from cake_drake.scenario import Training
 
 #: What DAgger writes in its output folder.
@@ -163,7 +164,10 @@ def dagger(
     labelled = int(report["frames"])
     log(f"round 0: {recipe.policy} trained {recipe.steps} steps on {len(demo_files)} "
         f"demonstrations ({labelled} expert-labelled frames)")  # fmt: skip
-    teacher = Teacher(spec.policy, dict(spec.options), float(beta))
+    options = dict(spec.options)
+    if spec.policy == EXPERT:  # the classical labeller relabels however far the learner drifts
+        options["max_repairs"] = None
+    teacher = Teacher(spec.policy, options, float(beta))
     kept_files, kept_rows, table, by_learner = [], [], [], 0
     phases = {"rollouts": 0.0, "writing": 0.0}  # seconds; the trainings' are added at the end
     for k in range(1, rounds + 1):
@@ -243,6 +247,7 @@ def dagger(
         "phases_s": {k: round(v, 3) for k, v in phases.items()},
         "dagger": {
             "rounds": table,
+            "teacher": {"policy": teacher.policy, "options": teacher.options},
             "beta": beta,
             "episodes_per_round": per_round,
             "round_steps": round_steps or recipe.steps,

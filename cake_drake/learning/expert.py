@@ -186,10 +186,12 @@ class _Action:
 class ClosedLoopExpert:
     """See the module's docstring. ``slow`` scales the classical speed limits at 10 Hz
     (scaled with the rate: twice the rate, twice the speed, up to the limits);
-    ``max_repairs`` bounds the replans, repeats and dropped motions of one episode."""
+    ``max_repairs`` bounds the replans, repeats and dropped motions of one episode (None:
+    no bound, as DAgger's labeller: a learner in control drags the hand off every motion,
+    and a teacher that gave up would label none of the states it drifts into)."""
 
     slow: float = SLOW_AT_10HZ
-    max_repairs: int = MAX_REPAIRS
+    max_repairs: int | None = MAX_REPAIRS
     #: Why the last episode ended (None while it runs): "goal reached" or what stopped it.
     reason: str | None = None
     #: What the expert decided, one dict per decision (replans, repeats, dropped motions).
@@ -485,7 +487,7 @@ class ClosedLoopExpert:
     def _repair(self, kind: str, why: str, step: int) -> bool:
         self.events.append({"step": step, "kind": kind, "why": why})
         self.repairs += 1
-        if self.repairs > self.max_repairs:
+        if self.max_repairs is not None and self.repairs > self.max_repairs:
             self._end(f"gave up after {self.max_repairs} repairs; the last: {why}")
             return False
         return True
