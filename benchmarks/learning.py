@@ -30,8 +30,9 @@ table's from nothing (the sum of every recording, training and evaluation it use
 long as each took when it was made).
 
 ``--jobs N`` trains N rows side by side (their datasets made first), a comparison's BC
-and DART, and runs N comparisons side by side. ``train`` gives the network every core but one, so on two
-cores one training leaves a core idle: the default is 2 there, 1 on larger machines.
+and DART, and runs N comparisons side by side. ``train`` gives the network every core
+but one, so on two cores one training leaves a core idle: the default is 2 there, 1 on
+larger machines.
 
 ``--compare``: BC, DART and DAgger at equal numbers of expert-labelled frames, per task.
 DAgger records ``--start-demos`` demonstrations and runs ``--rounds`` rounds of
