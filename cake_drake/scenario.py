@@ -135,6 +135,10 @@ class Recorded:
     differentiate: str = "spline"  # how q-dot and q-double-dot are recovered: spline | central
 
 
+#: Wall-clock budget (s) of one answer of a policy, unless ``reference.act_budget_s`` says.
+ACT_BUDGET_S = 30.0
+
+
 @dataclass
 class Policy:
     """A policy drives the arm (the learned layer's slot): ``factory`` (``module:attribute``)
@@ -158,7 +162,7 @@ class Policy:
     #: Wall-clock budget (s) of one answer of the policy: one that takes longer ends the
     #: run or the episode (exit 3). A Diffusion Policy's 100 denoising passes on a busy
     #: CPU want more than the default.
-    act_budget_s: float = 30.0
+    act_budget_s: float = ACT_BUDGET_S
 
 
 @dataclass

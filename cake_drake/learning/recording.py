@@ -38,6 +38,7 @@ from cake_drake.learning.rollout import (
     replay,
     rollout,
 )
+from cake_drake.scenario import ACT_BUDGET_S
 
 RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 
@@ -291,7 +292,7 @@ def _spec_from_json(d: dict) -> EpisodeSpec:
         options=d["options"],
         placement=tuple(d.get("placement", (0.0, 0.0))),
         noise=float(d.get("noise", 0.0)),
-        act_budget_s=float(d.get("act_budget_s", 30.0)),
+        act_budget_s=float(d.get("act_budget_s", ACT_BUDGET_S)),
     )
 
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from cake_drake.errors import InputError
 from cake_drake.plugins import DURING, guarded
+from cake_drake.scenario import ACT_BUDGET_S
 
 #: The policy the recordings use unless another is named: the classical cake as a policy.
 EXPERT = "cake_drake.learning.expert:make"
@@ -91,7 +92,7 @@ class EpisodeSpec:
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
     placement: tuple[float, float] = (0.0, 0.0)  # world.placement: xy (m), yaw (degrees)
     noise: float = 0.0  # DART: noise added to the executed action (units: noise_scale)
-    act_budget_s: float = 30.0  # wall-clock budget of one answer of the policy (s)
+    act_budget_s: float = ACT_BUDGET_S  # wall-clock budget of one answer of the policy
 
     def env(self, render_mode: str | None = None):
         from cake_drake.learning.env import StackEnv

@@ -44,6 +44,7 @@ from pydrake.systems.sensors import ImageRgba8U
 from cake_drake.plugins import DURING, PluginError, guarded
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import Observation, environment_state, goal_table, pose7
+from cake_drake.scenario import ACT_BUDGET_S
 from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports
 from cake_drake.world.facts import GoalReading, read_goal
 
@@ -96,7 +97,7 @@ class PolicySource(LeafSystem):
         cameras: Sequence[str],
         task: PolicyTask,
         stop_at_goal: bool = True,
-        act_budget_s: float | None = 30.0,
+        act_budget_s: float | None = ACT_BUDGET_S,
     ) -> None:
         super().__init__()
         #: End the policy's run when the measured world shows the goal (as the Gym env's
