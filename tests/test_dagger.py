@@ -183,6 +183,21 @@ def test_the_expert_gives_up_after_its_repairs_unless_unbounded():
     assert unbounded.reason is None
 
 
+def test_the_classical_teacher_is_unbounded_unless_its_options_bound_it():
+    from dataclasses import replace
+
+    from cake_drake.learning.dagger import labeller
+    from cake_drake.learning.rollout import EpisodeSpec
+
+    spec = EpisodeSpec(policy=CLOSED_LOOP, options={"slow": 0.5})
+    assert labeller(spec, 0.3).options == {"slow": 0.5, "max_repairs": None}
+    bounded = replace(spec, options={"max_repairs": 5})
+    assert labeller(bounded, 0.3).options == {"max_repairs": 5}
+    mine = replace(spec, policy="examples.random_policy:make", options={})
+    assert labeller(mine, 0.3).options == {}
+    assert spec.options == {"slow": 0.5}  # the recording's spec is not changed
+
+
 @pytest.mark.slow
 def test_a_dagger_round_labels_the_learners_states_and_fine_tunes(dagger_run):
     from cake_drake.learning.checkpoint import make

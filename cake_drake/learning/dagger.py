@@ -121,6 +121,16 @@ def _episodes(paths: list[Path], rows: list[dict]):
         yield _load(path, row, images=False)
 
 
+def labeller(spec, beta: float) -> Teacher:
+    """The recording's expert as DAgger's teacher. The classical expert relabels however
+    far the learner drifts: its repairs are unbounded unless the recording's options bound
+    them (``max_repairs``)."""
+    options = dict(spec.options)
+    if spec.policy == EXPERT:
+        options.setdefault("max_repairs", None)
+    return Teacher(spec.policy, options, float(beta))
+
+
 def dagger(
     root: Path,
     out: Path,
@@ -164,10 +174,7 @@ def dagger(
     labelled = int(report["frames"])
     log(f"round 0: {recipe.policy} trained {recipe.steps} steps on {len(demo_files)} "
         f"demonstrations ({labelled} expert-labelled frames)")  # fmt: skip
-    options = dict(spec.options)
-    if spec.policy == EXPERT:  # the classical labeller relabels however far the learner drifts
-        options["max_repairs"] = None
-    teacher = Teacher(spec.policy, options, float(beta))
+    teacher = labeller(spec, beta)
     kept_files, kept_rows, table, by_learner = [], [], [], 0
     phases = {"rollouts": 0.0, "writing": 0.0}  # seconds; the trainings' are added at the end
     for k in range(1, rounds + 1):
