@@ -136,8 +136,15 @@ $(OLDEST_STAMP): pyproject.toml
 	$(OLDEST)/bin/python -m pip install --quiet drake==$(OLDEST_DRAKE) --editable .
 	touch $(OLDEST_STAMP)
 
+# The suite on every core (pytest-xdist): first the tests marked `alone`, one at a time
+# with nothing beside them, then the rest spread over the cores. Both parts always run;
+# make test fails if either failed. PYTEST_ARGS adds options to both (e.g. -k NAME).
+JOBS ?= auto
 test: python system-packages-test $(TEST_STAMP) $(BYTECODE) oldest
-	$(PY) -m pytest
+	@status=0; \
+	$(PY) -m pytest -m alone $(PYTEST_ARGS) || { r=$$?; [ $$r -eq 5 ] || status=$$r; }; \
+	$(PY) -m pytest -n $(JOBS) -m "not alone" $(PYTEST_ARGS) || { r=$$?; [ $$r -eq 5 ] || status=$$r; }; \
+	exit $$status
 
 notebooks: system-packages-test $(TEST_STAMP) $(BYTECODE)
 	$(PY) notebooks/refresh.py

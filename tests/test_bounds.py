@@ -175,6 +175,7 @@ def test_the_workers_of_a_killed_sweep_die_with_it(tmp_path):
         time.sleep(0.1)
 
 
+@pytest.mark.alone
 @pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_to_a_sweeps_process_group_prints_one_line(tmp_path, sig):
@@ -232,6 +233,7 @@ def plan(problem, time_limit):
 """
 
 
+@pytest.mark.alone
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_sweep_whose_worker_ignores_sigterm_still_ends_on_a_signal(tmp_path, sig):
     """Workers told, joined with a deadline, then killed: the sweep's end never waits on a

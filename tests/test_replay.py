@@ -247,6 +247,7 @@ def test_replay_shows_whole_robot_in_a_browser(two_cube_run, tmp_path):
     )
 
 
+@pytest.mark.alone
 @pytest.mark.slow
 def test_meshcat_from_a_terminal_runs_in_real_time_and_waits_for_enter(tmp_path):
     """From a terminal, --meshcat holds the simulation to real time and keeps the viewer
