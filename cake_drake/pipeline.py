@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -55,6 +55,8 @@ from cake_drake.symbolic import (
     towers,
     validate_plan,
 )
+from cake_drake.symbolic.learned import PREFIX as LEARNED_PREFIX
+from cake_drake.symbolic.learned import checkpoint_of, is_learned, load_planner
 from cake_drake.symbolic.planners import overran_time_limit
 from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.cameras import check_cameras
@@ -64,11 +66,32 @@ from cake_drake.world.scene import jittered, layout
 
 #: A planner: ``(problem, time_limit) -> Plan`` (or a sequence of ground actions).
 Planner = Callable[[Problem, float | None], "Plan | Sequence[GroundAction]"]
+
+
+def _registered(name: str) -> Planner:
+    return partial(lambda problem, time_limit, _n: solve_problem(problem, _n, time_limit), _n=name)
+
+
+class _PlannerRegistry(Mapping):
+    """The shipped planners by name, and ``learned@DIR`` for any learned checkpoint (checked
+    when the scenario is: a missing or damaged folder is one line before anything runs)."""
+
+    def __getitem__(self, name: str) -> Planner:
+        if not isinstance(name, str) or not (name in PLANNERS or is_learned(name)):
+            raise KeyError(name)
+        if is_learned(name):
+            load_planner(checkpoint_of(name))
+        return _registered(name)
+
+    def __iter__(self):
+        return iter([*PLANNERS, f"{LEARNED_PREFIX}DIR"])
+
+    def __len__(self) -> int:
+        return len(PLANNERS) + 1
+
+
 #: The shipped planners, through the same door as a user's ``module:attribute``.
-PLANNER_REGISTRY: dict[str, Planner] = {
-    name: partial(lambda problem, time_limit, _n: solve_problem(problem, _n, time_limit), _n=name)
-    for name in PLANNERS
-}
+PLANNER_REGISTRY: Mapping[str, Planner] = _PlannerRegistry()
 
 
 @dataclass
@@ -331,8 +354,8 @@ def check_policy(ref: Policy, cameras=()) -> None:
 
 #: Every file a run may write to its output folder.
 RUN_OUTPUTS = (
-    "plan.txt", "trajectory.npz", "final_state.png", "joint4_torque.png", "summary.json",
-    "scenario.yaml",
+    "plan.txt", "trajectory.npz", "final_state.png", "joint4_torque.png", "cake.png",
+    "summary.json", "scenario.yaml",
 )  # fmt: skip
 
 

@@ -276,6 +276,7 @@ def test_the_joint_plot_marks_each_fault_when_it_struck():
     assert marks == [(1.2, "knock c"), (3.0, "move a"), (2.5, "slip (action 3)")]
 
 
+@pytest.mark.alone
 def test_helpers_or_not_the_outputs_are_the_same_bytes(tmp_path):
     """The picture and the plot drawn in helper processes (with the plot's figure
     prepared ahead, see outputs.plots.joint_figure) or in the run's own process: the same
@@ -287,7 +288,7 @@ def test_helpers_or_not_the_outputs_are_the_same_bytes(tmp_path):
         assert result.success, result.message
         written[helpers] = tmp_path / helpers
     always, never = written["always"], written["never"]
-    for name in ("final_state.png", "joint4_torque.png", "trajectory.npz"):
+    for name in ("final_state.png", "joint4_torque.png", "cake.png", "trajectory.npz"):
         assert (always / name).read_bytes() == (never / name).read_bytes(), name
     timing = {"wall_s", "simulation_wall_s", "rtf", "stages_s", "ik_median_ms", "planner"}
     a, b = (json.loads((d / "summary.json").read_text()) for d in (always, never))

@@ -47,13 +47,18 @@ def layers(scenario, plan) -> dict:
     """Each layer of the cake, classical (which one) or learned (which checkpoint): the
     label the chapter asks a student to put on every layer of a system."""
     from cake_drake.scenario import Policy, Recorded
+    from cake_drake.symbolic.learned import is_learned
 
     reference, motion = scenario.reference, scenario.motion
     if isinstance(reference, Policy):
         what = reference.checkpoint or reference.factory
         symbolic = geometric = {"kind": "learned", "what": f"whole-task policy ({what})"}
     else:
-        symbolic = {"kind": "classical", "what": getattr(plan, "planner", None)}
+        planner = getattr(plan, "planner", None)
+        if isinstance(planner, str) and is_learned(planner):
+            symbolic = {"kind": "learned", "what": f"{planner}, {plan.heuristic}"}
+        else:
+            symbolic = {"kind": "classical", "what": planner}
         if isinstance(reference, Recorded):
             geometric = {"kind": "classical", "what": f"a recorded trajectory ({reference.path})"}
         elif motion.skills:
@@ -252,6 +257,11 @@ def write_outputs(
         extra_tau=[(logs.gravity, "g(q): static gravity term")],
         marks=[(e["time_s"], e["kind"]) for e in execution.monitoring.get("events", [])],
         faults=fault_marks(result.faults, logs),
+    )
+    worker.submit_plot(
+        layers=layers(cake.scenario, plan),
+        path=out.path("cake.png"),
+        title=f"the cake of this run: {result.problem.name}, {controller.name} controller",
     )
     try:
         write_plan(plan, out.path("plan.txt"))

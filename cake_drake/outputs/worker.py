@@ -41,6 +41,12 @@ def render_png(blocks, poses, q_arm, fingers, path, renderer=None) -> None:
 
 
 def plot_png(job: dict, figure=None) -> None:
+    """Draw one plot job: the run's cake (a job with ``layers``) or the joint plot."""
+    if "layers" in job:
+        from cake_drake.outputs.cake import write_cake
+
+        write_cake(**job)
+        return
     from cake_drake.outputs.plots import joint_plot
 
     joint_plot(**job, figure=figure)
@@ -69,7 +75,8 @@ def _warm_plot():
     ready = [joint_figure(drawn=True)]  # for joint 4, the one a run plots
 
     def handle(job: dict) -> None:
-        figure = ready.pop() if ready and job.get("joint", 4) == 4 else None
+        joint_job = "layers" not in job and job.get("joint", 4) == 4
+        figure = ready.pop() if ready and joint_job else None
         plot_png(job, figure)
 
     return handle
@@ -255,7 +262,8 @@ class OutputWorker:
         self._picture.submit((_pack(poses), np.asarray(q_arm), float(fingers), Path(path)))
 
     def submit_plot(self, **job) -> None:
-        """Start :func:`cake_drake.outputs.plots.joint_plot` with these arguments."""
+        """Start :func:`cake_drake.outputs.plots.joint_plot` with these arguments, or
+        :func:`cake_drake.outputs.cake.write_cake` for a job with ``layers``."""
         if self._plot is None:
             plot_png(job)
             return
