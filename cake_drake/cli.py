@@ -72,7 +72,8 @@ every stacked cube must stand within 5 mm (xy) of the one below.
 
 A run is a scenario (--scenario FILE [--name NAME]; models/scenarios/ has the shipped
 ones); the flags below override its fields. Outputs in the output folder: plan.txt,
-trajectory.npz, final_state.png, joint4_torque.png, summary.json, scenario.yaml (the
+trajectory.npz, final_state.png, joint4_torque.png, cake.png (the run's three layers,
+each classical or learned), summary.json, scenario.yaml (the
 resolved scenario: run it again with --scenario to reproduce the run), and replay.html
 with --meshcat. They are written whole or not at all.
 
@@ -1105,6 +1106,13 @@ least squares to tau_applied - tau_model at the measured state and acceleration,
 fifth of each run held out. OUT gets residual.json; a scenario uses it with controller:
 !ComputedTorque {residual: OUT}.
 
+--planner trains the symbolic layer's learned planner instead, from no dataset: every
+state of Blocksworlds of --blocks MIN MAX blocks (default 3 6, at most 7) is enumerated,
+each sampled goal's exact distances give every state's optimal actions, and a relational
+network learns to put its choice on them (--steps, default 3000; --batch-size, default
+64; --seed). OUT gets planner.json and weights.npz: plan with it as --planner learned@OUT
+(python -m cake_drake.plan, run, a scenario's task.planner).
+
 Exit codes: 0 trained; 2 bad input (a dataset lacking what the policy needs, a device
 that is not here, --dagger below 1, --beta outside 0 to 1, --dagger on a dataset with no
 task to roll a policy out on or no kept episodes, DAgger's flags without --dagger); 4 the
@@ -1119,13 +1127,22 @@ def train_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
-        "dataset", type=Path, nargs="+",
-        help="a recording (python -m cake_drake.record); with --residual, run folders",
+        "dataset", type=Path, nargs="*",
+        help="a recording (python -m cake_drake.record); with --residual, run folders; "
+        "none with --planner",
     )  # fmt: skip
     p.add_argument("--out", type=Path, required=True, help="the training's folder")
     p.add_argument(
         "--residual", action="store_true",
         help="fit the dynamic layer's residual to run folders written with outputs.logs",
+    )  # fmt: skip
+    p.add_argument(
+        "--planner", action="store_true",
+        help="train the symbolic layer's learned planner (exact labels, no dataset)",
+    )  # fmt: skip
+    p.add_argument(
+        "--blocks", type=int, nargs=2, metavar=("MIN", "MAX"),
+        help="--planner: the problems' sizes (default 3 6)",
     )  # fmt: skip
     p.add_argument("--policy", help="mlp | act | diffusion (default: the recipe's)")
     p.add_argument("--inputs", help="state | images | both | skill (default: the recipe's)")
@@ -1156,6 +1173,13 @@ def main_train(argv: list[str] | None = None) -> int:
     from cake_drake.learning.train import for_inputs, for_policy, recipe_of, train
 
     args = train_parser().parse_args(argv)
+    if args.planner:
+        return _main_planner(args)
+    if args.blocks is not None:
+        raise InputError("--blocks without --planner: it sets the learned planner's sizes")
+    if not args.dataset:
+        raise InputError("no DATASET given: train reads a recording (or run folders with "
+                         "--residual; none with --planner)")  # fmt: skip
     if args.residual:
         return _main_residual(args)
     if len(args.dataset) != 1:
@@ -1205,6 +1229,41 @@ def _main_residual(args: argparse.Namespace) -> int:
                              "setting; a residual is fitted by least squares")  # fmt: skip
     train_residual(args.dataset, args.out)
     print(describe(args.out))
+    return EXIT_OK
+
+
+def _main_planner(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from cake_drake.learning.planner import PlannerRecipe, check_recipe, train_planner
+
+    if args.dataset:
+        raise InputError(f"{args.dataset[0]}: --planner reads no dataset (its labels are "
+                         "computed exactly from enumerated states)")  # fmt: skip
+    others = ("residual", "policy", "inputs", "cameras", "weights", "dagger", "resume")
+    for name in others:
+        if getattr(args, name) not in (None, False):
+            raise InputError(f"--{name.replace('_', '-')} with --planner: it is a policy's "
+                             "setting, not the learned planner's")  # fmt: skip
+    if args.device not in ("auto", "cpu"):
+        raise InputError(f"--device {args.device} with --planner: it trains on the CPU")
+    recipe = PlannerRecipe(seed=args.seed)
+    given = {"steps": args.steps, "batch_size": args.batch_size}
+    if args.blocks is not None:
+        given.update(min_blocks=args.blocks[0], max_blocks=args.blocks[1])
+    recipe = replace(recipe, **{k: v for k, v in given.items() if v is not None})
+    check_recipe(recipe)
+    from cake_drake.learning.planner import FILES
+    from cake_drake.outputs.files import OutputDir
+
+    with OutputDir(args.out, "train --planner", FILES) as staged:
+        info = train_planner(recipe, staged, log=lambda line: print(line, flush=True))
+        staged.commit()
+    print(
+        f"{args.out}: learned planner trained {recipe.steps} steps on {info['states']} states "
+        f"of {recipe.min_blocks}-{recipe.max_blocks} blocks in {info['minutes']:.1f} min; "
+        f"plan with --planner learned@{args.out}"
+    )
     return EXIT_OK
 
 

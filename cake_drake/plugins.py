@@ -33,8 +33,12 @@ BEFORE, DURING = EXIT_BAD_INPUT, EXIT_EXECUTION_FAILED
 
 
 def is_plugin(spec: str) -> bool:
-    """True when ``spec`` names user code (``module:attribute``), not a registry entry."""
-    return ":" in spec
+    """True when ``spec`` names user code (``module:attribute``), not a registry entry.
+
+    A registry name may carry an argument after ``@`` (``learned@DIR``, a folder that may
+    hold a colon): ``@`` cannot appear in a module's name, so such a name is never a plug-in.
+    """
+    return ":" in spec and "@" not in spec.partition(":")[0]
 
 
 def load_attribute(spec: str, what: str) -> object:

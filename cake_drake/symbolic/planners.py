@@ -31,6 +31,9 @@ from cake_drake.errors import CakeDrakeError, InputError, NoPlanError
 from cake_drake.symbolic import fast_downward
 from cake_drake.symbolic.diagnose import diagnose
 from cake_drake.symbolic.grounding import to_task
+from cake_drake.symbolic.learned import PREFIX as LEARNED_PREFIX
+from cake_drake.symbolic.learned import checkpoint_of, plan_learned
+from cake_drake.symbolic.learned import describe as describe_learned
 from cake_drake.symbolic.pddl import Problem, load_problem
 from cake_drake.symbolic.plans import Plan
 from cake_drake.symbolic.validation import validate_plan
@@ -44,7 +47,9 @@ class PlannerInfo:
     search: str
     heuristic: str
     optimal: bool
-    backend: str  # "pyperplan" (in-process), "fast-downward" (subprocess, `fd` extra), "portfolio"
+    # "pyperplan" (in-process), "fast-downward" (subprocess, `fd` extra), "portfolio",
+    # "learned" (a network's choices rolled out, cake_drake.symbolic.learned)
+    backend: str
     summary: str
 
 
@@ -102,6 +107,15 @@ PLANNERS: dict[str, PlannerInfo] = {
             "satisficing; Fast Downward, needs the fd extra",
         ),
         PlannerInfo(
+            "learned",
+            "greedy rollout of the network's choices (no search)",
+            "none: the network picks each action",
+            False,
+            "learned",
+            "a network trained on problems of 3-6 blocks picks each action; any number of "
+            "blocks (learned@DIR: another checkpoint)",
+        ),
+        PlannerInfo(
             "fd-seq-opt-lmcut",
             "Fast Downward A* (seq-opt-lmcut)",
             "LM-cut",
@@ -143,11 +157,23 @@ _FD_ALIASES = {"fd-lama-first": "lama-first", "fd-seq-opt-lmcut": "seq-opt-lmcut
 
 
 def planner_info(name: str) -> PlannerInfo:
-    """The registry entry for ``name``; :class:`InputError` listing the valid names otherwise."""
+    """The registry entry for ``name``; :class:`InputError` listing the valid names otherwise.
+
+    ``learned@DIR`` is the learned planner with the checkpoint in folder DIR.
+    """
+    if isinstance(name, str) and name.startswith(LEARNED_PREFIX):
+        checkpoint_of(name)  # an empty DIR is named here
+        learned = PLANNERS["learned"]
+        folder = name[len(LEARNED_PREFIX) :]
+        summary = f"the learned planner with the checkpoint {folder}"
+        return PlannerInfo(name, learned.search, learned.heuristic, False, "learned", summary)
     try:
         return PLANNERS[name]
     except KeyError:
-        raise InputError(f"unknown planner '{name}' (choose from: {', '.join(PLANNERS)})") from None
+        raise InputError(
+            f"unknown planner '{name}' (choose from: {', '.join(PLANNERS)}, "
+            f"or {LEARNED_PREFIX}DIR for another learned checkpoint)"
+        ) from None
 
 
 class _LmCut(LmCutHeuristic):
@@ -396,7 +422,16 @@ def solve_problem(
         raise InputError(f"problem '{problem.name}' has no (:goal ...): nothing to plan for")
 
     used, selection = planner, ""
-    if info.backend == "fast-downward":
+    used_info = info
+    if info.backend == "learned":
+        t0 = time.perf_counter()
+        actions, learned = plan_learned(problem, planner, time_limit)
+        elapsed = time.perf_counter() - t0
+        used_info = PlannerInfo(
+            planner, info.search, describe_learned(learned),
+            False, "learned", info.summary,
+        )  # fmt: skip
+    elif info.backend == "fast-downward":
         t0 = time.perf_counter()
         actions = _fast_downward(problem, planner, time_limit)
         elapsed = time.perf_counter() - t0
@@ -418,8 +453,8 @@ def solve_problem(
                 _gave_up_message(problem, planner, time_limit or 0, "at the limit")
             ) from None
         elapsed = time.perf_counter() - t0
+        used_info = PLANNERS[used]
 
-    used_info = PLANNERS[used]
     plan = Plan(
         tuple(actions),
         used,
