@@ -294,6 +294,11 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
                 f"simulation.max_sim_s = {s.simulation.max_sim_s:g} s"
             )
     elif isinstance(s.reference, Policy):
+        if s.motion.skills:
+            raise InputError(
+                f"motion.skills ({s.motion.skills}) with reference: !Policy: a whole-task "
+                "policy replaces the geometric layer the skills would be; keep one of the two"
+            )
         check_policy(s.reference, s.cameras)
     else:
         resolve(s.reference.action_source, ACTION_SOURCES, "action source")

@@ -310,6 +310,8 @@ def resolve_path(path: str, base: Path | None = None) -> Path:
 
 def portable_path(path: str | Path) -> str:
     """``package://cake_drake/...`` for a shipped file, else the absolute path."""
+    if str(path).startswith(PACKAGE):  # already portable (never a folder named package:)
+        return str(path)
     given = Path(path).expanduser()
     if given.exists() and not given.is_file() and not given.is_dir():
         # A pipe (bash's <(...) is /dev/fd/N): resolving it names the pipe's inode.

@@ -15,7 +15,7 @@ from cake_drake.symbolic import GroundAction, Plan, Problem, fact_str, validate_
 from cake_drake.symbolic.grounding import apply_action, ground_all
 from cake_drake.symbolic.kernels import kernels, latest_kernel
 from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
-from cake_drake.systems.plan_source import ActionCommand, Refusal
+from cake_drake.systems.plan_source import MAX_TRIES, ActionCommand, Refusal
 from cake_drake.world.facts import STACK_TOL, lost_cubes, read_facts, stack_offsets
 
 #: m: a goal's stacked cube standing farther than this off the one below is set down
@@ -44,6 +44,10 @@ class MonitorState:
     #: The plan's first actions are a re-place, done in order (not skipped where a later
     #: kernel holds: the cube goes to the table before it is stacked again).
     forced: int = 0
+    #: The action last repeated because it left the world without its effects, and how
+    #: many times in a row (MAX_TRIES stops the run).
+    failing: GroundAction | None = None
+    tries: int = 0
 
     def __deepcopy__(self, memo):
         return self
@@ -211,14 +215,18 @@ class ExecutionMonitor(LeafSystem):
             s = self._replan(s, t, done, facts, ks[min(nominal, len(ks) - 1)])
         elif i != nominal:
             kind = "skip ahead" if i > nominal else "repeat"
-            s = replace(
-                s,
-                pos=i,
-                events=s.events
-                + (self._event(t, done, kind, s, ks[min(nominal, len(ks) - 1)], facts),),
-            )
+            event = self._event(t, done, kind, s, ks[min(nominal, len(ks) - 1)], facts)
+            s = replace(s, pos=i, events=s.events + (event,))
+            if kind == "repeat":
+                again = s.plan[i]
+                tries = s.tries + 1 if s.failing == again else 1
+                s = replace(s, failing=again, tries=tries)
+                if tries >= MAX_TRIES:
+                    s = replace(s, error=f"{again} failed {MAX_TRIES} times in a row (its "
+                                f"effects missing each time: {', '.join(event['missing'][:3])}); "
+                                "the world cannot be recovered by repeating it")  # fmt: skip
         else:
-            s = replace(s, pos=i)
+            s = replace(s, pos=i, failing=None, tries=0)
         if s.error is None and s.pos < len(s.plan):
             s = replace(s, emitted=s.emitted[:done] + (s.plan[s.pos],))
         self._set(state, replace(s, seen=done))

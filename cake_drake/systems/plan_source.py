@@ -10,6 +10,11 @@ from pydrake.systems.framework import LeafSystem
 
 from cake_drake.symbolic import GroundAction
 
+#: The same ground action ended without its effects this many times in a row: the run
+#: stops, naming it (the layer below cannot do it here). The learned skills and the
+#: execution monitor both keep it.
+MAX_TRIES = 3
+
 
 @dataclass(frozen=True)
 class ActionCommand:

@@ -49,18 +49,17 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
 from cake_drake.errors import ExecutionError
+from cake_drake.plugins import DURING, guarded
 from cake_drake.policy.observations import SkillContext, skill_context, skill_vector
+from cake_drake.scenario import ACT_BUDGET_S
 from cake_drake.symbolic import GroundAction
-from cake_drake.systems.plan_source import ActionCommand, Refusal
+from cake_drake.systems.plan_source import MAX_TRIES, ActionCommand, Refusal
 from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports
 from cake_drake.world.facts import read_facts
 from cake_drake.world.scene import CUBE_SIZE
 
 #: m below the transit height the grasp frame may be when a pick or a place counts as done.
 LIFT_TOL = 0.02
-#: The same ground action ended without its effects this many times in a row: the run
-#: stops (the skill cannot do it here).
-MAX_TRIES = 3
 #: Control periods an action may take (15 s at 10 Hz) unless the scenario says.
 DEFAULT_BUDGET = 150
 GRIPPER_MAX = 0.08
@@ -126,6 +125,8 @@ class LearnedSkills(LeafSystem):
         self.skill, self.label, self.world = skill, label, world
         self.budget, self.meaning, self._params = budget, meaning, waypoints
         self._clearance = getattr(waypoints, "transit_clearance", 0.05)
+        #: Wall-clock budget (s) of one answer (a skill may carry its own, as a policy does).
+        self._budget_s = getattr(skill, "act_budget_s", ACT_BUDGET_S)
         self.period_s = 1.0 / rate_hz
         self._action = self.DeclareAbstractInputPort(
             "action", AbstractValue.Make(ActionCommand(0, None))
@@ -183,10 +184,18 @@ class LearnedSkills(LeafSystem):
             "observation.state": np.r_[arm[:7], hand[0] + hand[1]].astype(np.float32),
             "observation.skill": skill_vector(prog.context, cubes, X_WG),
         }
-        answer = np.asarray(self.skill.act(observation), float).reshape(-1)
+        # Guarded as every plug-in's answer: what it raises, or an answer slower than its
+        # budget, stops the run in one line naming the skill.
+        raw = guarded(f"skill {self.label!r}", self.skill.act, observation, exit_code=DURING,
+                      budget_s=self._budget_s)  # fmt: skip
+        try:
+            answer = np.asarray(raw, float).reshape(-1)
+            shown = np.array2string(answer, precision=3)
+        except (TypeError, ValueError):  # not numbers at all
+            answer, shown = np.empty(0), repr(raw)
         if answer.shape != (8,) or not np.all(np.isfinite(answer)):
             raise ExecutionError(
-                f"skill {self.label!r} answered {np.array2string(answer, precision=3)[:60]} "
+                f"skill {self.label!r} answered {shown[:60]} "
                 f"for {prog.action} (action {prog.working + 1}); a skill answers 8 finite "
                 "numbers (7 joint targets, the gripper's width)"
             )
@@ -209,7 +218,8 @@ class LearnedSkills(LeafSystem):
             ctx = skill_context(meaning, cubes, self.world.slots, self._params)
         except Exception as e:  # noqa: BLE001 - an action the skill cannot take, named
             return replace(prog, error=f"action {cmd.index + 1} {cmd.action}: {e}")
-        self.skill.reset()
+        guarded(f"skill {self.label!r}", self.skill.reset, exit_code=DURING,
+                budget_s=self._budget_s)  # fmt: skip
         return replace(prog, working=cmd.index, action=cmd.action, context=ctx, steps=0)
 
     def _end(self, prog: SkillProgress, held: bool) -> SkillProgress:
