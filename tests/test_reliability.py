@@ -95,3 +95,13 @@ def test_a_skill_that_hangs_is_stopped_at_its_budget_naming_it(monkeypatch, tmp_
     assert time.monotonic() - t0 < 25
     assert e.value.exit_code == EXIT_EXECUTION_FAILED
     assert f"skill '{tmp_path.resolve()}'" in str(e.value) and "0.5 s" in str(e.value)
+
+
+def test_the_lerobot_env_offers_only_learning_tasks():
+    from cake_drake.learning.lerobot_env import CakeDrakeEnv
+
+    with pytest.raises(ValueError) as e:
+        CakeDrakeEnv(task="learned_tower5")
+    offered = str(e.value).split("choose one of: ")[1].split(", ")
+    assert offered == ["stack2", "tower3", "tower5", "blocks3", "skills"]
+    assert CakeDrakeEnv(task="tower3").task == "tower3"

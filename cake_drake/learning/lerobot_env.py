@@ -106,10 +106,10 @@ class CakeDrakeEnv(EnvConfig):
         self.fps = int(round(spec.rate_hz))
 
     def _spec(self):
-        from cake_drake.learning.recording import spec_from_scenario
-        from cake_drake.scenario import load_scenario, scenario_names
+        from cake_drake.learning.recording import learning_tasks, spec_from_scenario
+        from cake_drake.scenario import load_scenario
 
-        names = scenario_names(LEARNING)
+        names = learning_tasks(LEARNING)
         if self.task not in names:
             raise ValueError(f"--env.task {self.task!r}; choose one of: {', '.join(names)}")
         return spec_from_scenario(load_scenario(LEARNING, self.task))

@@ -43,6 +43,19 @@ from cake_drake.scenario import ACT_BUDGET_S
 RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 
 
+def learning_tasks(path) -> list[str]:
+    """The names in a scenario file that are learning tasks: a ``!Policy`` whose factory
+    demonstrates (the expert), not a run of a trained checkpoint or of the planner."""
+    from cake_drake.scenario import Policy, load_scenario, scenario_names
+
+    out = []
+    for name in scenario_names(path):
+        ref = load_scenario(path, name).reference
+        if isinstance(ref, Policy) and ref.factory and not ref.checkpoint:
+            out.append(name)
+    return out
+
+
 def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
     """The episodes a scenario describes: its problem (``task.generate``: that many blocks,
     one problem per seed; ``task.problem``: that one), its cameras (the default two when
