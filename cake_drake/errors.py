@@ -173,8 +173,25 @@ def _reopen_closed_streams() -> None:
             setattr(sys, name, open(fd, "w", closefd=False))  # noqa: SIM115
 
 
+def _close_progress_bars() -> None:
+    """Erase and close every progress bar still open (tqdm's, as LeRobot's training and
+    loading draw them), so that the last line a user reads is the error, on a line of its
+    own, and no bar is drawn after it."""
+    std = sys.modules.get("tqdm.std")
+    if std is None:
+        return
+    for bar in list(getattr(std.tqdm, "_instances", ())):
+        try:
+            bar.leave = False  # closing erases the bar's line instead of drawing it again
+            bar.close()
+            bar.disable = True
+        except Exception:  # noqa: BLE001 - a bar half torn down: nothing more to draw
+            pass
+
+
 def _interrupted(name: str) -> int:
     how = " by SIGTERM" if name == "SIGTERM" else ""
+    _close_progress_bars()
     print(f"error: interrupted{how}; nothing was written", file=sys.stderr)
     return EXIT_INTERRUPTED
 

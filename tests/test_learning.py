@@ -265,6 +265,43 @@ def test_train_resumes_its_last_checkpoint(trained, tmp_path):
 
 
 @pytest.mark.slow
+def test_train_into_an_empty_folder_trains_there(trained, tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    r = cake("train", str(trained / "ds"), "--out", str(empty), "--steps", "2",
+             "--batch-size", "4", "--device", "cpu")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert (empty / "checkpoints" / "last" / "pretrained_model" / "config.json").is_file()
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_training_ends_on_the_error_line_alone(trained, tmp_path):
+    import signal
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.train", str(trained / "ds"), "--out",
+         str(tmp_path / "run"), "--steps", "100000", "--batch-size", "4", "--device", "cpu"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    seen = b""
+    deadline = time.monotonic() + 300
+    while b"step/s" not in seen and b"Training:" not in seen:  # LeRobot's bar is drawn
+        assert proc.poll() is None and time.monotonic() < deadline, seen[-400:]
+        seen += os.read(proc.stderr.fileno(), 4096)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=120)
+    err = (seen + rest).decode(errors="replace")
+    assert proc.returncode == 130, err[-800:]
+    # What a terminal shows last: the error, from the start of its line, nothing after.
+    last = err.rstrip("\n").split("\n")[-1].split("\r")[-1]
+    assert last == "error: interrupted; nothing was written", repr(err[-300:])
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.slow
 def test_a_checkpoint_acts_in_evaluate_a_run_and_the_gym_env(trained, tmp_path):
     r = cake("evaluate", str(trained / "run"), "--suite", str(LEARNING), "--name", "stack2",
              "--episodes", "1", "--seed", "1000", "--workers", "1", "--out",

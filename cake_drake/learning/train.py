@@ -400,9 +400,19 @@ def train(
             log_freq=max(1, min(200, recipe.steps // 10)),
             env_eval_freq=0,
         )
-        with _argv([]), fast_batches(keys) as phases:
-            t0 = time.perf_counter()
-            lerobot_train(cfg)
+        # LeRobot writes into a folder that does not exist yet; an empty one is the same
+        # to the user: it is handed over as not there, and is there again if nothing was
+        # written.
+        emptied = out.is_dir() and not any(out.iterdir())
+        if emptied:
+            out.rmdir()
+        try:
+            with _argv([]), fast_batches(keys) as phases:
+                t0 = time.perf_counter()
+                lerobot_train(cfg)
+        finally:
+            if emptied and not out.exists():
+                out.mkdir()
     phases["train"] = time.perf_counter() - t0
     made = {"dataset": str(root), "recipe": asdict(recipe), "seed": seed}
     made["phases_s"] = {k: round(v, 3) for k, v in phases.items()}
