@@ -105,3 +105,86 @@ def test_the_lerobot_env_offers_only_learning_tasks():
     offered = str(e.value).split("choose one of: ")[1].split(", ")
     assert offered == ["stack2", "tower3", "tower5", "blocks3", "skills"]
     assert CakeDrakeEnv(task="tower3").task == "tower3"
+
+
+@pytest.fixture(scope="module")
+def logged_run(tmp_path_factory) -> Path:
+    """A real run's folder with its logs.npz (the residual's input)."""
+    out = tmp_path_factory.mktemp("logged")
+    s = Scenario()
+    s.outputs.folder, s.outputs.render, s.outputs.logs = str(out), False, True
+    assert run(s).success
+    return out
+
+
+def _write_npz_claiming(path: Path, shape: tuple[int, ...]) -> None:
+    """An .npz whose one member's npy header claims ``shape`` of float64, with no data."""
+    import io
+    import zipfile
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<f8", "fortran_order": False, "shape": shape}
+    )
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("huge.npy", b"\x93NUMPY\x01\x00" + header.getvalue()[8:])
+
+
+@pytest.mark.parametrize(
+    "damage, words",
+    [
+        ("truncated", "logs.npz: not a readable .npz"),
+        ("six joints", "array 'q' has shape (N6, 6); expected (N, 7)"),
+        ("time stands still", "times in 't' must strictly increase"),
+        ("huge extra array", "its arrays hold more than 256 MiB ('huge' has shape"),
+        ("nan", "array 'v' holds NaN"),
+    ],
+)
+def test_damaged_logs_are_one_line_and_no_residual_is_written(logged_run, tmp_path, damage,
+                                                              words):  # fmt: skip
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    logs = dict(np.load(logged_run / "logs.npz"))
+    n = len(logs["t"])
+    if damage == "truncated":
+        data = (logged_run / "logs.npz").read_bytes()
+        (run_dir / "logs.npz").write_bytes(data[: len(data) // 2])
+    else:
+        if damage == "six joints":
+            for k in ("q", "v", "a_d", "tau_applied"):
+                logs[k] = logs[k][:, :6]
+            words = words.replace("N6", str(n))
+        elif damage == "time stands still":
+            logs["t"] = np.zeros(n)
+        elif damage == "nan":
+            logs["v"][5, 2] = np.nan
+        np.savez(run_dir / "logs.npz", **logs)
+        if damage == "huge extra array":
+            import zipfile
+
+            extra = tmp_path / "extra.npz"
+            _write_npz_claiming(extra, (40_000, 1_000))
+            with zipfile.ZipFile(extra) as src, zipfile.ZipFile(run_dir / "logs.npz", "a") as z:
+                z.writestr("huge.npy", src.read("huge.npy"))
+    r = _cli("cake_drake.train", "--residual", str(run_dir), "--out", str(tmp_path / "res"))
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
+    assert not (tmp_path / "res").exists()
+
+
+def test_a_residual_whose_weights_are_not_numbers_is_one_line(tmp_path):
+    import json
+
+    folder = tmp_path / "res"
+    folder.mkdir()
+    shipped = ROOT / "models" / "residuals" / "cubes_0.5kg" / "residual.json"
+    data = json.loads(shipped.read_text())
+    data["weights"] = [["heavy"] * len(data["weights"][0])] * len(data["weights"])
+    (folder / "residual.json").write_text(json.dumps(data))
+    path = tmp_path / "s.yaml"
+    path.write_text(f"bad:\n  controller: !ComputedTorque {{residual: {folder}}}\n")
+    r = _cli("cake_drake.run", "--scenario", str(path), "--name", "bad", "--out",
+             str(tmp_path / "out"))  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "residual.json: weights must be 7 x" in r.stderr
+    assert not (tmp_path / "out").exists()

@@ -105,8 +105,11 @@ class ResidualModel:
         if data.get("features") != list(FEATURES):
             raise InputError(f"{path}: trained on inputs {data.get('features')}; this "
                              f"residual reads {list(FEATURES)}")  # fmt: skip
-        w = np.asarray(data.get("weights"), float)
-        b = np.asarray(data.get("bound_nm"), float)
+        try:
+            w = np.asarray(data.get("weights"), float)
+            b = np.asarray(data.get("bound_nm"), float)
+        except (TypeError, ValueError):  # strings, nested lists of unequal length, null
+            w = b = np.empty(0)
         if w.shape != (ARM, len(FEATURES)) or b.shape != (ARM,):
             raise InputError(f"{path}: weights must be {ARM} x {len(FEATURES)} and bound_nm "
                              f"{ARM} numbers")  # fmt: skip

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cake_drake.arrays import npz_headers
 from cake_drake.errors import InputError
 
 GRIPPER_OPEN = 0.04  # m per finger (8 cm between the fingers)
@@ -351,51 +352,12 @@ def save_npz(path: str | Path, samples: dict[str, np.ndarray], actions: list[str
 REQUIRED = ("t", "q", "gripper")
 
 
-#: The most a recorded trajectory's arrays may hold once decompressed (a run's is ~1 MB).
-MAX_NPZ_ARRAY_BYTES = 256 * 2**20
-
-
-def _check_npz_size(path: Path, expected: str) -> None:
-    """Refuse, unread, an .npz over :data:`MAX_INPUT_BYTES` or whose arrays, by their npy
-    headers, would decompress to more than :data:`MAX_NPZ_ARRAY_BYTES`."""
-    from cake_drake.symbolic.sexpr import MAX_INPUT_BYTES
-
-    if path.exists() and not path.is_file():
-        raise InputError(f"{path}: not a regular file; {expected}")
-    if path.is_file() and path.stat().st_size > MAX_INPUT_BYTES:
-        raise InputError(
-            f"{path}: {path.stat().st_size / 1e6:.0f} MB is too large for a trajectory "
-            f"(at most {MAX_INPUT_BYTES // 2**20} MiB)"
-        )
-    if not zipfile.is_zipfile(path):
-        return  # np.load says what it is
-    total = 0
-    with zipfile.ZipFile(path) as archive:
-        for info in archive.infolist():
-            if not info.filename.endswith(".npy"):
-                continue
-            with archive.open(info) as f:
-                major, _ = np.lib.format.read_magic(f)
-                read = (
-                    np.lib.format.read_array_header_1_0
-                    if major == 1
-                    else np.lib.format.read_array_header_2_0
-                )
-                shape, _, dtype = read(f)
-            total += int(np.prod(shape, dtype=object)) * dtype.itemsize
-            if total > MAX_NPZ_ARRAY_BYTES:
-                raise InputError(
-                    f"{path}: its arrays hold more than {MAX_NPZ_ARRAY_BYTES // 2**20} MiB "
-                    f"({info.filename[:-4]!r} has shape {shape}); {expected}"
-                )
-
-
 def load_npz(path: str | Path) -> dict[str, np.ndarray]:
     """Read a ``trajectory.npz``; bad files give one clear line."""
     path = Path(path)
     expected = "expected a trajectory.npz written by python -m cake_drake.run"
+    npz_headers(path, expected)  # refused unread: not a file, too large, not an archive
     try:
-        _check_npz_size(path, expected)
         with np.load(path, allow_pickle=False) as data:
             if not hasattr(data, "files"):  # a bare .npy array, not an archive
                 raise InputError(f"{path}: a single .npy array, not an .npz archive; {expected}")

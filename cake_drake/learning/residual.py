@@ -17,6 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from cake_drake.arrays import read_npz
 from cake_drake.dynamic.residual import FILE, Kinematics, ResidualModel, fit, samples
 from cake_drake.errors import InputError
 
@@ -24,22 +25,34 @@ from cake_drake.errors import InputError
 HELD_OUT = 0.2
 
 
+#: What the residual reads of a run's ``logs.npz``: N samples of the arm's 7 joints.
+LOG_SHAPES = {
+    "t": ("N",),
+    "q": ("N", 7),
+    "v": ("N", 7),
+    "a_d": ("N", 7),
+    "tau_applied": ("N", 7),
+    "fingers": ("N",),
+}
+
+
 def load_logs(run: Path) -> SimpleNamespace:
-    """A run folder's ``logs.npz``, with what the residual needs; one line otherwise."""
+    """A run folder's ``logs.npz``, checked by :func:`cake_drake.arrays.read_npz` (only what
+    the residual reads, the rest refused by its headers if too large): seven joints, at
+    least 10 samples, times that advance, finite numbers; one line otherwise."""
     path = Path(run) / "logs.npz" if Path(run).is_dir() else Path(run)
     if not path.is_file():
         raise InputError(f"{run}: no logs.npz; run the scenario with outputs.logs: true")
-    try:
-        with np.load(path) as data:
-            logs = SimpleNamespace(**{k: data[k] for k in data.files})
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: unreadable ({e})") from None
-    need = ("t", "q", "v", "a_d", "tau_applied", "fingers")
-    missing = [k for k in need if not hasattr(logs, k)]
-    if missing:
-        raise InputError(f"{path}: lacks {', '.join(missing)}; run it again with this version")
+    expected = "a run's logs.npz (outputs.logs: true) of the 7-joint arm"
+    logs = SimpleNamespace(**read_npz(path, expected, LOG_SHAPES))
     if len(logs.t) < 10:
         raise InputError(f"{path}: {len(logs.t)} samples; a run of at least 10 is needed")
+    if not np.all(np.diff(logs.t) > 0):
+        raise InputError(f"{path}: times in 't' must strictly increase (the accelerations "
+                         "the residual is fitted to are differences over time)")  # fmt: skip
+    bad = [k for k in LOG_SHAPES if not np.all(np.isfinite(getattr(logs, k)))]
+    if bad:
+        raise InputError(f"{path}: array {bad[0]!r} holds NaN or infinite values")
     return logs
 
 
@@ -62,6 +75,9 @@ def train_residual(runs: list[Path], out: Path, bound_nm: list[float] | None = N
         test_y.append(label[cut:])
     phi, label = np.concatenate(fit_phi), np.concatenate(fit_y)
     weights = fit(phi, label)
+    if not np.all(np.isfinite(weights)):  # never written: a residual must be numbers
+        raise InputError(f"{', '.join(str(r) for r in runs)}: the fit gave no finite weights "
+                         "(samples that do not tell the joints' torques apart)")  # fmt: skip
     model = ResidualModel(weights=weights.tolist())
     if bound_nm is not None:
         model.bound_nm = list(bound_nm)
