@@ -188,3 +188,56 @@ def test_a_residual_whose_weights_are_not_numbers_is_one_line(tmp_path):
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and "residual.json: weights must be 7 x" in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def _damaged_checkpoint(tmp_path: Path, damage: str) -> Path:
+    import json
+    import shutil
+
+    folder = tmp_path / "policy"
+    shutil.copytree(ROOT / "models" / "policies" / "stack2", folder)
+    cfg_path = folder / "config.json"
+    cfg = json.loads(cfg_path.read_text())
+    if damage == "config not a mapping":
+        cfg = [cfg]
+    elif damage == "feature without shape":
+        del cfg["input_features"]["observation.state"]["shape"]
+    elif damage == "chunk size its weights lack":
+        cfg["chunk_size"] = 20
+    elif damage == "truncated weights":
+        weights = folder / "model.safetensors"
+        weights.write_bytes(weights.read_bytes()[:5000])
+    cfg_path.write_text(json.dumps(cfg))
+    return folder
+
+
+@pytest.mark.parametrize(
+    "damage, words",
+    [
+        ("config not a mapping", "config.json: holds a list, not a mapping"),
+        ("feature without shape", "input_features.observation.state has no shape"),
+        ("chunk size its weights lack", "tensor net.6.weight has shape [80, 512], but "
+                                        "config.json (its features, n_obs_steps 2, chunk_size 20)"),
+        ("truncated weights", "model.safetensors: not a readable safetensors file"),
+    ],
+)  # fmt: skip
+@pytest.mark.parametrize("command", ["run", "evaluate"])
+def test_a_checkpoint_whose_files_disagree_is_one_line_before_anything_runs(
+    tmp_path, damage, words, command
+):
+    folder = _damaged_checkpoint(tmp_path, damage)
+    suite = ROOT / "models" / "scenarios" / "learning.yaml"
+    if command == "run":
+        path = tmp_path / "s.yaml"
+        path.write_text(
+            "bad:\n  task: {problem: package://cake_drake/pddl/stack2.pddl}\n"
+            f"  reference: !Policy {{checkpoint: {folder}}}\n"
+        )
+        args = ("cake_drake.run", "--scenario", str(path), "--name", "bad")
+    else:
+        args = ("cake_drake.evaluate", str(folder), "--suite", str(suite), "--name", "stack2",
+                "--episodes", "1")  # fmt: skip
+    r = _cli(*args, "--out", str(tmp_path / "out"))
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "out").exists()

@@ -45,10 +45,115 @@ def model_folder(path: Path) -> Path:
 
 
 def _config(folder: Path) -> dict:
+    """The checkpoint's ``config.json``, checked against itself and against its weights'
+    shapes (:func:`read_checkpoint`)."""
+    return read_checkpoint(folder)
+
+
+def _feature_shapes(path: Path, config: dict, key: str) -> dict[str, tuple[int, ...]]:
+    features = config.get(key)
+    if not isinstance(features, dict):
+        raise InputError(f"{path}: field {key!r} is missing or not a mapping of features")
+    out = {}
+    for name, feature in features.items():
+        shape = feature.get("shape") if isinstance(feature, dict) else None
+        if not (
+            isinstance(shape, list)
+            and shape
+            and all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in shape)
+        ):
+            raise InputError(f"{path}: {key}.{name} has no shape (a list of positive "
+                             f"integers), got {shape!r}")  # fmt: skip
+        out[name] = tuple(shape)
+    return out
+
+
+def weight_shapes(path: Path) -> dict[str, tuple[int, ...]]:
+    """The tensors of a ``model.safetensors`` and their shapes, from its header alone (no
+    torch, nothing else read); one line for a file that is truncated or not one."""
+    import struct
+
     try:
-        return json.loads((folder / "config.json").read_text())
+        with open(path, "rb") as f:
+            head = f.read(8)
+            size = struct.unpack("<Q", head)[0] if len(head) == 8 else -1
+            if not 2 <= size <= min(100 * 2**20, path.stat().st_size - 8):
+                raise ValueError("its header's length does not fit the file (truncated?)")
+            header = json.loads(f.read(size))
+        total = path.stat().st_size - 8 - size
+        out, end = {}, 0
+        for name, tensor in header.items():
+            if name == "__metadata__":
+                continue
+            out[name] = tuple(int(n) for n in tensor["shape"])
+            end = max(end, int(tensor["data_offsets"][1]))
+        if end > total:
+            raise ValueError(f"its tensors need {end} bytes, the file holds {total} (truncated)")
+    except (OSError, ValueError, KeyError, TypeError, struct.error) as e:
+        raise InputError(f"{path}: not a readable safetensors file ({e})") from None
+    return out
+
+
+def read_checkpoint(folder: Path) -> dict:
+    """The one checked reader of a checkpoint's ``config.json`` (whole-task policy or
+    skill): a mapping with a ``type``, features with shapes, and, for the project's own
+    ``cake_mlp``, weights whose shapes (read from ``model.safetensors``'s header) are the
+    ones the config says: the inputs' statistics, the first layer's width (the inputs
+    times ``n_obs_steps``, for a policy over numbers), the last layer's (``chunk_size``
+    actions). One line naming the file and the field otherwise, before anything is built."""
+    folder = Path(folder)
+    path = folder / "config.json"
+    try:
+        config = json.loads(path.read_text())
     except (OSError, ValueError) as e:
-        raise InputError(f"{folder / 'config.json'}: unreadable ({e})") from None
+        raise InputError(f"{path}: unreadable ({e})") from None
+    if not isinstance(config, dict):
+        raise InputError(f"{path}: holds a {type(config).__name__}, not a mapping (a LeRobot "
+                         "policy's config)")  # fmt: skip
+    if not isinstance(config.get("type"), str):
+        raise InputError(f"{path}: field 'type' (the policy's kind) is missing")
+    inputs = _feature_shapes(path, config, "input_features")
+    outputs = _feature_shapes(path, config, "output_features")
+    if "action" not in outputs:
+        raise InputError(f"{path}: names no action feature (output_features.action)")
+    weights = weight_shapes(folder / "model.safetensors")
+    if config["type"] != "cake_mlp":
+        return config
+    ints = {}
+    for key, default in (("n_obs_steps", 1), ("chunk_size", 10), ("n_action_steps", 5)):
+        value = config.get(key, default)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise InputError(f"{path}: field {key!r} is {value!r}; a positive integer")
+        ints[key] = value
+    if ints["n_action_steps"] > ints["chunk_size"]:
+        raise InputError(f"{path}: n_action_steps {ints['n_action_steps']} is more than "
+                         f"chunk_size {ints['chunk_size']}")  # fmt: skip
+    from cake_drake.learning.mlp.features import EXTRA_INPUTS, OBS_IMAGES, OBS_STATE
+
+    action = outputs["action"][0]
+    names = {OBS_STATE: "state", **EXTRA_INPUTS}
+    need = {"action_mean": (action,), "action_std": (action,)}
+    for key, size in inputs.items():
+        if key in names:
+            need[f"{names[key]}_mean"] = need[f"{names[key]}_std"] = (size[0],)
+    layers = sorted(int(k.split(".")[1]) for k in weights
+                    if k.startswith("net.") and k.endswith(".weight"))  # fmt: skip
+    if not layers:
+        raise InputError(f"{folder / 'model.safetensors'}: holds no network (net.*.weight)")
+    last = weights[f"net.{layers[-1]}.weight"]
+    need[f"net.{layers[-1]}.weight"] = (ints["chunk_size"] * action, last[1])
+    if not any(k.startswith(OBS_IMAGES) for k in inputs):  # numbers only: the first layer
+        width = ints["n_obs_steps"] * sum(s[0] for k, s in inputs.items() if k in names)
+        need[f"net.{layers[0]}.weight"] = (weights[f"net.{layers[0]}.weight"][0], width)
+    for name, shape in need.items():
+        if weights.get(name) != shape:
+            said = "is missing" if name not in weights else f"has shape {list(weights[name])}"
+            raise InputError(
+                f"{folder / 'model.safetensors'}: tensor {name} {said}, but {path.name} "
+                f"(its features, n_obs_steps {ints['n_obs_steps']}, chunk_size "
+                f"{ints['chunk_size']}) needs {list(shape)}"
+            )
+    return config
 
 
 def is_skill(config: dict) -> bool:
