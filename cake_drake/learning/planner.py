@@ -62,10 +62,10 @@ class PlannerRecipe:
 
     min_blocks: int = 3
     max_blocks: int = 6
-    goals: int = 1200  # sampled goals, spread over the sizes
+    goals: int = 4000  # sampled goals, spread over the sizes
     states_per_goal: int = 24
     width: int = 64
-    steps: int = 3000
+    steps: int = 12000
     batch_size: int = 64
     lr: float = 2e-3
     extra_rounds: int = 3
