@@ -275,3 +275,90 @@ def test_evaluation_tells_the_expert_from_the_random_policy(tmp_path):
              "small", "--frames", "65", "--out", "refused", cwd=tmp_path)  # fmt: skip
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--frames 65" in r.stderr
     assert not (tmp_path / "refused").exists()
+
+
+def _damaged_copy(source: Path, dest: Path, damage: str) -> Path:
+    import shutil
+
+    shutil.copytree(source, dest)
+    info_path = dest / "meta" / "info.json"
+    info = json.loads(info_path.read_text())
+    if damage == "truncated video":
+        video = sorted((dest / "videos").glob("**/*.mp4"))[0]
+        video.write_bytes(video.read_bytes()[: video.stat().st_size // 2])
+    elif damage == "truncated data":
+        data = sorted((dest / "data").glob("**/*.parquet"))[0]
+        data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+    elif damage == "action shape":
+        info["features"]["action"]["shape"] = [9]
+        info["features"]["action"]["names"] = None
+    elif damage == "fps 0":
+        info["fps"] = 0
+    elif damage == "report not a mapping":
+        (dest / "report.json").write_text("[1, 2, 3]")
+    elif damage == "recipe field of another type":
+        report = json.loads((dest / "report.json").read_text())
+        report["training"] = {"steps": "many"}
+        (dest / "report.json").write_text(json.dumps(report))
+    elif damage == "metadata deleted":
+        (dest / "meta" / "stats.json").unlink()
+    info_path.write_text(json.dumps(info))
+    return dest
+
+
+@needs_lerobot
+@pytest.mark.parametrize(
+    "damage, words",
+    [
+        ("truncated video", ".mp4: unreadable video"),
+        ("truncated data", ".parquet: unreadable table"),
+        ("action shape", "features.action has shape [9], but file-000.parquet's actions hold 8"),
+        ("fps 0", "info.json: field 'fps' is 0"),
+        ("report not a mapping", "report.json: holds a list, not a mapping"),
+        ("recipe field of another type", "report.json: training.steps is 'many'; a recipe's "
+                                          "steps is int"),
+        ("metadata deleted", "meta/stats.json: missing from the dataset; a LeRobot dataset is "
+                             "read from its own folder, never fetched"),
+    ],
+)  # fmt: skip
+def test_a_damaged_recording_is_one_line_and_never_a_download(recorded, tmp_path, damage, words):
+    folder, _ = recorded
+    ds = _damaged_copy(folder / "ds1", tmp_path / "ds", damage)
+    # Whatever the user's environment says, nothing is fetched.
+    env = {"HF_HUB_OFFLINE": "0", "HF_DATASETS_OFFLINE": "0"}
+    r = cake("train", str(ds), "--out", "run", "--steps", "2", "--batch-size", "2",
+             "--device", "cpu", cwd=tmp_path, env_extra=env)  # fmt: skip
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr[-2000:]
+    assert "huggingface.co" not in r.stderr and not (tmp_path / "run").exists()
+
+
+@needs_lerobot
+def test_a_recording_rewritten_in_place_with_its_old_times_is_read_anew(recorded, tmp_path):
+    """The Arrow copy the datasets library caches is keyed on the tables' content, not on
+    their paths and times: a table replaced by another, its time kept (cp -p, an archive),
+    is read as it is now."""
+    import shutil
+
+    from cake_drake.learning.dataset import content_digest, read
+
+    folder, _ = recorded
+    ds = tmp_path / "ds"
+    shutil.copytree(folder / "ds1", ds)
+    first = read(ds)
+    before = np.asarray(first.hf_dataset.with_format("numpy")["action"])
+    table = sorted((ds / "data").glob("**/*.parquet"))[0]
+    stat = table.stat()
+    digest = content_digest(ds)
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    data = pq.read_table(table)
+    doubled = pa.array([[2.0 * x for x in row] for row in data["action"].to_pylist()],
+                       type=data.schema.field("action").type)  # fmt: skip
+    pq.write_table(data.set_column(data.schema.get_field_index("action"), "action", doubled),
+                   table)  # fmt: skip
+    os.utime(table, ns=(stat.st_atime_ns, stat.st_mtime_ns))
+    assert table.stat().st_mtime_ns == stat.st_mtime_ns and content_digest(ds) != digest
+    after = np.asarray(read(ds).hf_dataset.with_format("numpy")["action"])
+    np.testing.assert_allclose(after, 2 * before, rtol=1e-6)

@@ -68,20 +68,21 @@ def source(root: Path) -> tuple[dict, EpisodeSpec, list[Path]]:
     """The recording DAgger starts from: its report, the task its episodes ran on, and its
     kept episodes' files. One line (exit 2) where there is no task to roll a policy out on
     or no episodes to append to."""
+    from cake_drake.learning.dataset import read_report
     from cake_drake.learning.recording import _spec_from_json
 
     root = Path(root)
     need = "as python -m cake_drake.record writes them"
     path = root / "report.json"
-    try:
-        report = json.loads(path.read_text())
-        spec = _spec_from_json(report["spec"])
-        seeds = [int(s) for s in report["seeds"]]
-    except FileNotFoundError:
+    if not path.is_file():
         raise InputError(
             f"{path}: missing; --dagger rolls the policy out on the recording's task, "
             f"named there ({need})"
-        ) from None
+        )
+    report = read_report(root)
+    try:
+        spec = _spec_from_json(report["spec"])
+        seeds = [int(s) for s in report["seeds"]]
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         raise InputError(
             f"{path}: names no task (spec) and seeds to roll a policy out on; --dagger "

@@ -24,6 +24,7 @@ Hugging Face hub set offline.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import sys
 import tempfile
@@ -74,13 +75,26 @@ ACTION_NAMES = {
 }
 
 
+def _offline() -> None:
+    """Never the hub, whatever the user's environment says: a recording is read from its
+    folder alone. Set before huggingface_hub and datasets are imported (they read the
+    variables then), and on their constants if they already are."""
+    for name in ("HF_HUB_OFFLINE", "HF_DATASETS_OFFLINE"):
+        os.environ[name] = "1"
+    hub = sys.modules.get("huggingface_hub.constants")
+    if hub is not None:
+        hub.HF_HUB_OFFLINE = True
+    config = sys.modules.get("datasets.config")
+    if config is not None:
+        config.HF_HUB_OFFLINE = config.HF_DATASETS_OFFLINE = True
+
+
 def require_lerobot() -> None:
     """Refuse, in one line, where ``lerobot`` is not installed (with the line that installs
     it), where this Python is older than LeRobot 0.6 needs (3.12), or where the installed
     LeRobot is older than the one these commands are written against. Cheap (the
     packages' metadata and LeRobot's top package), so a check before any work can ask."""
-    os.environ.setdefault("HF_HUB_OFFLINE", "1")  # never the hub: local files only
-    os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+    _offline()
     os.environ.setdefault("HF_DATASETS_DISABLE_PROGRESS_BARS", "1")
     if sys.version_info < (3, 12):
         raise InputError(
@@ -228,6 +242,167 @@ def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  
     return frames
 
 
+#: The metadata LeRobot reads before anything else; it would fetch a missing one.
+META_FILES = ("meta/info.json", "meta/stats.json", "meta/tasks.parquet")
+
+
+def read_info(root: Path) -> dict:
+    """A recording's ``meta/info.json``, checked: a mapping with a positive ``fps``, the
+    data (and video) path templates, and features whose shapes are lists of positive
+    integers, the action's as long as its names. One line naming the field otherwise."""
+    path = Path(root) / "meta" / "info.json"
+    try:
+        info = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise InputError(f"{path}: unreadable ({e})") from None
+    if not isinstance(info, dict):
+        raise InputError(f"{path}: holds a {type(info).__name__}, not a mapping")
+    fps = info.get("fps")
+    if not (isinstance(fps, int | float) and not isinstance(fps, bool) and 0 < fps <= 1000):
+        raise InputError(f"{path}: field 'fps' is {fps!r}; frames a second, more than 0")
+    for key in ("data_path",) + (("video_path",) if info.get("video_path") else ()):
+        if not isinstance(info.get(key), str):
+            raise InputError(f"{path}: field {key!r} is missing or not a path template")
+    features = info.get("features")
+    if not isinstance(features, dict) or "action" not in features:
+        raise InputError(f"{path}: field 'features' is missing, or has no 'action'")
+    for name, f in features.items():
+        shape = f.get("shape") if isinstance(f, dict) else None
+        ok = isinstance(shape, list) and all(
+            isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in shape
+        )
+        if not ok or not isinstance(f.get("dtype"), str):
+            raise InputError(f"{path}: features.{name} needs a dtype and a shape (a list of "
+                             f"positive integers), got {f!r:.80}")  # fmt: skip
+    action = features["action"]
+    names = action.get("names")
+    if isinstance(names, list) and [len(names)] != action["shape"]:
+        raise InputError(f"{path}: features.action has shape {action['shape']} but "
+                         f"{len(names)} names ({', '.join(map(str, names))})")  # fmt: skip
+    return info
+
+
+def read_report(root: Path, required: bool = False) -> dict:
+    """A recording's ``report.json`` (what cake_drake.record wrote), checked to be a
+    mapping whose ``training`` part, if any, is one too; {} when absent and not
+    ``required``."""
+    path = Path(root) / "report.json"
+    if not path.is_file():
+        if required:
+            raise InputError(f"{Path(root)}: no report.json; not a dataset written by "
+                             "cake_drake.record")  # fmt: skip
+        return {}
+    try:
+        report = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise InputError(f"{path}: unreadable ({e})") from None
+    if not isinstance(report, dict):
+        raise InputError(f"{path}: holds a {type(report).__name__}, not a mapping (as "
+                         "cake_drake.record writes it)")  # fmt: skip
+    if not isinstance(report.get("training", {}), dict):
+        raise InputError(f"{path}: field 'training' is not a mapping (the task's recipe)")
+    return report
+
+
+def check_recording(root: Path) -> dict:
+    """The one check of a recording before LeRobot or anything else reads it: every file
+    its metadata names is there (:func:`missing_files`), ``info.json`` is sound
+    (:func:`read_info`), every table's footer reads (a truncated file is named), the
+    action column is as wide as ``info.json`` says, and every video opens with a video
+    stream and all its packets. Its ``info``."""
+    import pyarrow.parquet as pq
+
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(f"{root}: no such dataset folder")
+    gone = missing_files(root)
+    if gone:
+        more = f" (and {len(gone) - 1} more)" if len(gone) > 1 else ""
+        raise InputError(f"{root / gone[0]}: missing from the dataset{more}; a LeRobot "
+                         "dataset is read from its own folder, never fetched")  # fmt: skip
+    info = read_info(root)
+    tables = sorted((root / "meta").glob("**/*.parquet")) + sorted(
+        (root / "data").glob("chunk-*/file-*.parquet")
+    )
+    for table in tables:
+        try:
+            pq.read_metadata(table)
+        except Exception as e:  # noqa: BLE001 - whatever pyarrow says of a damaged file
+            raise InputError(
+                f"{table}: unreadable table ({str(e)[:80]}); the recording is damaged "
+                "(record it again, or restore the file)"
+            ) from None
+    data = sorted((root / "data").glob("chunk-*/file-*.parquet"))
+    if data:
+        try:
+            column = pq.ParquetFile(data[0]).read_row_group(0, columns=["action"])["action"]
+            width = len(column[0].as_py()) if len(column) else None
+        except Exception as e:  # noqa: BLE001
+            raise InputError(f"{data[0]}: unreadable table ({str(e)[:80]})") from None
+        want = info["features"]["action"]["shape"][0]
+        if width is not None and width != want:
+            raise InputError(
+                f"{root / 'meta' / 'info.json'}: features.action has shape [{want}], but "
+                f"{data[0].name}'s actions hold {width} numbers"
+            )
+    for video in sorted((root / "videos").glob("**/*.mp4")):
+        _check_video(video)
+    return info
+
+
+def _check_video(path: Path) -> None:
+    """A video opens, has a video stream, and every packet it says it holds is there."""
+    import av
+
+    try:
+        with av.open(str(path)) as container:
+            if not container.streams.video:
+                raise ValueError("no video stream")
+            stream = container.streams.video[0]
+            packets = sum(1 for p in container.demux(stream) if p.size)
+            if stream.frames and packets < stream.frames:
+                raise ValueError(f"{packets} of its {stream.frames} frames are there")
+    except (av.FFmpegError, ValueError, OSError) as e:
+        raise InputError(f"{path}: unreadable video ({str(e)[:80]}); the recording is "
+                         "damaged (record it again, or restore the file)") from None  # fmt: skip
+
+
+def content_digest(root: Path) -> str:
+    """A digest of a recording's tables' bytes (names and contents): what its cached
+    Arrow copy is keyed on, so a file rewritten in place, times kept, is read anew."""
+    import hashlib
+
+    h = hashlib.sha256()
+    root = Path(root)
+    for path in sorted((root / "data").glob("chunk-*/file-*.parquet")) + sorted(
+        (root / "meta").glob("**/*.parquet")
+    ):
+        h.update(path.relative_to(root).as_posix().encode() + b"\0")
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()[:32]
+
+
+@contextlib.contextmanager
+def local_recording(root: Path):
+    """While LeRobot reads the recording at ``root``: checked first
+    (:func:`check_recording`), offline whatever the environment says, and the datasets
+    library's Arrow cache keyed on the tables' content (its own key is a file's path and
+    time). Yields the checked ``info``."""
+    require_lerobot()
+    info = check_recording(root)
+    import datasets.config
+
+    _offline()
+    before = datasets.config.HF_DATASETS_CACHE
+    datasets.config.HF_DATASETS_CACHE = Path(before) / "cake_drake" / content_digest(root)
+    try:
+        yield info
+    finally:
+        datasets.config.HF_DATASETS_CACHE = before
+
+
 def missing_files(root: Path) -> list[str]:
     """The files a LeRobot dataset at ``root`` names that are not there (relative paths):
     ``meta/info.json``, the episode tables, and every data and video file they point to.
@@ -237,9 +412,9 @@ def missing_files(root: Path) -> list[str]:
 
     root = Path(root)
     info_path = root / "meta" / "info.json"
-    if not info_path.is_file():
-        return ["meta/info.json"]
-    import json
+    absent = [m for m in META_FILES if not (root / m).is_file()]
+    if absent:
+        return absent
 
     try:
         info = json.loads(info_path.read_text())
@@ -274,16 +449,11 @@ def missing_files(root: Path) -> list[str]:
 def read(root: Path):
     """The dataset at ``root``, as lerobot reads it (decoding videos with PyAV), from its
     folder alone: a file it lacks is named (exit 2), never fetched."""
-    require_lerobot()
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    with local_recording(root):
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    gone = missing_files(root)
-    if gone:
-        more = f" (and {len(gone) - 1} more)" if len(gone) > 1 else ""
-        raise InputError(f"{Path(root) / gone[0]}: missing from the dataset{more}; "
-                         "a LeRobot dataset is read from its own folder")  # fmt: skip
-    with _quiet():
-        return LeRobotDataset(REPO_ID, root=root, video_backend="pyav")
+        with _quiet():
+            return LeRobotDataset(REPO_ID, root=root, video_backend="pyav")
 
 
 def episode_actions(dataset, index: int) -> np.ndarray:

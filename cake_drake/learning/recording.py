@@ -330,10 +330,7 @@ def replay_check(root: Path, workers: int) -> dict:
     """Replay every episode of the dataset at ``root`` open loop (see the module)."""
     from cake_drake.learning import dataset
 
-    report_path = root / "report.json"
-    if not report_path.is_file():
-        raise InputError(f"{root}: no report.json; not a dataset written by cake_drake.record")
-    report = json.loads(report_path.read_text())
+    report = dataset.read_report(root, required=True)
     data = dataset.read(root)
     spec = _spec_from_json(report["spec"])
     jobs = [

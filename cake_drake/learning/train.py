@@ -48,24 +48,53 @@ INPUTS = ("state", "images", "both", "skill")
 TRAIN_OUTPUTS = ("checkpoints", "train.json")
 
 
+def _fits(value, kind) -> bool:
+    """Whether ``value`` (read from JSON) is of the dataclass field type ``kind``."""
+    import types
+    import typing
+
+    origin = typing.get_origin(kind)
+    if origin in (typing.Union, types.UnionType):
+        return any(_fits(value, k) for k in typing.get_args(kind))
+    if kind is type(None):
+        return value is None
+    if origin is list:
+        (item,) = typing.get_args(kind) or (object,)
+        return isinstance(value, list) and all(_fits(v, item) for v in value)
+    if kind is float:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, kind) if isinstance(kind, type) else True
+
+
+def _recipe_part(kind, values: dict, where: str):
+    """``kind(**values)`` for the fields ``kind`` has, each checked for its type."""
+    import typing
+
+    hints = typing.get_type_hints(kind)
+    known = {k: v for k, v in values.items() if k in hints}
+    for k, v in known.items():
+        if not _fits(v, hints[k]) and not hasattr(hints[k], "__dataclass_fields__"):
+            shown = getattr(hints[k], "__name__", str(hints[k]))
+            raise InputError(f"{where}.{k} is {v!r:.40}; a recipe's {k} is {shown}")
+    return known
+
+
 def recipe_of(root: Path) -> tuple[Training, dict]:
-    """The recipe a recording's task ships (``report.json``'s ``training``), or the default;
-    and the recording's report."""
-    report_path = Path(root) / "report.json"
-    report = {}
-    if report_path.is_file():
-        try:
-            report = json.loads(report_path.read_text())
-        except ValueError:
-            report = {}
-    fields = report.get("training") or {}
-    known = {k: v for k, v in fields.items() if k in Training.__dataclass_fields__}
+    """The recipe a recording's task ships (``report.json``'s ``training``, each field
+    checked for its type), or the default; and the recording's report."""
+    report = datasets.read_report(root)
+    where = f"{Path(root) / 'report.json'}: training"
+    known = _recipe_part(Training, report.get("training") or {}, where)
     parts = {k: known.pop(k, None) for k in ("images", "act", "diffusion")}
     recipe = Training(**known)
     for name, kind in (("images", ImageRecipe), ("act", PolicyRecipe), ("diffusion", PolicyRecipe)):
-        if isinstance(parts[name], dict):
-            fields = kind.__dataclass_fields__
-            setattr(recipe, name, kind(**{k: v for k, v in parts[name].items() if k in fields}))
+        if parts[name] is None:
+            continue
+        if not isinstance(parts[name], dict):
+            raise InputError(f"{where}.{name} is {parts[name]!r:.40}; a mapping of its fields")
+        setattr(recipe, name, kind(**_recipe_part(kind, parts[name], f"{where}.{name}")))
     return recipe, report
 
 
@@ -93,7 +122,7 @@ def for_policy(recipe: Training, policy: str | None) -> Training:
 
 
 def _info(root: Path) -> dict:
-    return json.loads((Path(root) / "meta" / "info.json").read_text())
+    return datasets.read_info(root)
 
 
 def input_keys(
@@ -195,11 +224,7 @@ def check(
 
     root, out = Path(root), Path(out)
     device_for(device)
-    if not root.is_dir():
-        raise InputError(f"{root}: no such dataset folder")
-    gone = datasets.missing_files(root)
-    if gone:
-        raise InputError(f"{root / gone[0]}: missing from the dataset; not a LeRobot dataset")
+    datasets.check_recording(root)  # every file there and readable: nothing is fetched
     if recipe.policy not in POLICIES:
         raise InputError(f"--policy {recipe.policy!r}; choose one of: {', '.join(POLICIES)}")
     if recipe.inputs not in INPUTS:
@@ -336,10 +361,18 @@ def train(
 ) -> Path:
     """Train ``recipe`` on the dataset at ``root`` into ``out`` with lerobot's own loop (see
     the module), from ``pretrained``'s weights when given; the checkpoint's folder."""
-    from cake_drake.learning.checkpoint import device_for
-
     datasets.require_lerobot()
     keys = check(root, out, recipe, device, resume)
+    # Everything LeRobot reads of the recording: checked, offline, its Arrow cache keyed
+    # on content (cake_drake.learning.dataset.local_recording).
+    with datasets.local_recording(root):
+        return _train(root, out, recipe, keys, device, seed, resume, weights, repo_id,
+                      pretrained)  # fmt: skip
+
+
+def _train(root, out, recipe, keys, device, seed, resume, weights, repo_id, pretrained) -> Path:
+    from cake_drake.learning.checkpoint import device_for
+
     os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
     # The datasets library warns at each table it opens that its progress bars stay off,
     # which the environment asks for (cake_drake.learning.dataset.require_lerobot).
