@@ -106,7 +106,11 @@ def run_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--plan", type=Path, help="task.plan: execute this plan file instead of planning"
     )
-    g.add_argument("--planner", help="task.planner: a registry name or module:attribute")
+    g.add_argument(
+        "--planner",
+        help="task.planner: a registry name, learned@DIR (a learned planner's checkpoint) or "
+        "module:attribute",
+    )
     g.add_argument("--time-limit", type=float, help="task.time_limit: planner limit, s")
     g.add_argument("--ik", help="motion.ik: drake | dls | module:attribute")
     g.add_argument(
@@ -518,7 +522,9 @@ def plan_parser() -> argparse.ArgumentParser:
         help=f"PDDL domain and problem (default: {BLOCKSWORLD_DOMAIN.name} {PROBLEM_5.name})",
     )
     parser.add_argument(
-        "--planner", default=DEFAULT_PLANNER, help=f"planner name (default: {DEFAULT_PLANNER})"
+        "--planner",
+        default=DEFAULT_PLANNER,
+        help=f"planner name, learned@DIR or module:attribute (default: {DEFAULT_PLANNER})",
     )
     parser.add_argument("-o", "--output", metavar="PLAN", help="also write the plan to this file")
     parser.add_argument(

@@ -599,6 +599,10 @@ def run(
             slots=slots,
         )
         stages["diagram_build"] = time.perf_counter() - t
+        if worker is not None:  # drawn in the plot's helper while the world is simulated
+            from cake_drake.outputs.report import cake_title, layers
+
+            worker.submit_cake(layers(scenario, plan), cake_title(problem, cake))
 
         names = cake.reference.actions
         if cake.reference.policy is not None:  # a whole-task policy: its steps, its budget

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import time
 
 import numpy as np
@@ -83,6 +84,11 @@ def layers(scenario, plan) -> dict:
         )
         dynamic = {"kind": "classical", "what": name}
     return {"symbolic": symbolic, "geometric": geometric, "dynamic": dynamic}
+
+
+def cake_title(problem, cake) -> str:
+    """The cake picture's title: the problem and the controller."""
+    return f"the cake of this run: {problem.name}, {cake.controller.name} controller"
 
 
 def layers_line(found: dict) -> str:
@@ -258,11 +264,8 @@ def write_outputs(
         marks=[(e["time_s"], e["kind"]) for e in execution.monitoring.get("events", [])],
         faults=fault_marks(result.faults, logs),
     )
-    worker.submit_plot(
-        layers=layers(cake.scenario, plan),
-        path=out.path("cake.png"),
-        title=f"the cake of this run: {result.problem.name}, {controller.name} controller",
-    )
+    if worker.cake() is None:  # not asked for while the world was simulated
+        worker.submit_cake(layers(cake.scenario, plan), cake_title(result.problem, cake))
     try:
         write_plan(plan, out.path("plan.txt"))
         out.write_text("scenario.yaml", dump_scenario(cake.scenario))
@@ -288,5 +291,9 @@ def write_outputs(
         worker.wait()
     except RuntimeError as e:
         raise OutputError(f"{out.out}: {e}") from None
+    try:
+        shutil.copyfile(worker.cake(), out.path("cake.png"))
+    except (OSError, TypeError) as e:  # TypeError: the helper wrote no cake
+        raise OutputError(f"{out.out}: cannot write cake.png ({e})") from None
     stages["outputs"] = time.perf_counter() - t0
     out.write_json("summary.json", summary(result))

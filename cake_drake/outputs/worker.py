@@ -269,6 +269,21 @@ class OutputWorker:
             return
         self._plot.submit(job)
 
+    def submit_cake(self, layers: dict, title: str) -> None:
+        """Start drawing the run's cake (:func:`cake_drake.outputs.cake.write_cake`) now,
+        while the world is simulated: the layers are known once the plan is. It is drawn
+        into a private folder; :meth:`cake` gives the file once :meth:`wait` returned."""
+        import tempfile
+
+        self._cake_dir = Path(tempfile.mkdtemp(prefix="cake_drake-cake-"))
+        self.submit_plot(layers=layers, path=self._cake_dir / "cake.png", title=title)
+
+    def cake(self) -> Path | None:
+        """The cake drawn by :meth:`submit_cake`, if it was asked for and is there."""
+        folder = getattr(self, "_cake_dir", None)
+        path = folder / "cake.png" if folder is not None else None
+        return path if path is not None and path.is_file() else None
+
     def wait(self, timeout_s: float = 120.0) -> None:
         """Wait for every submitted job; raises RuntimeError naming the first that failed,
         or saying that a helper died or did not answer within ``timeout_s``."""
@@ -284,3 +299,8 @@ class OutputWorker:
         for helper in (self._picture, self._plot):
             if helper is not None:
                 helper.close()
+        folder = getattr(self, "_cake_dir", None)
+        if folder is not None:
+            import shutil
+
+            shutil.rmtree(folder, ignore_errors=True)
