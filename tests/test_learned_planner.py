@@ -232,5 +232,5 @@ def test_a_run_with_the_learned_top_replans_after_a_fault_and_draws_its_cake(tmp
     assert summary["layers"]["symbolic"]["kind"] == "learned"
     assert "relational network" in summary["layers"]["symbolic"]["what"]
     assert summary["layers"]["geometric"]["kind"] == "classical"
-    assert "symbolic learned (learned, relational network" in r.stdout
+    assert "symbolic learned (learned, relational network" in r.stderr
     assert (tmp_path / "cake.png").stat().st_size > 10_000
