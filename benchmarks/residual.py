@@ -38,7 +38,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from machine import machine  # noqa: E402
 
 from cake_drake.dynamic.residual import HOLD, from_mass  # noqa: E402
-from cake_drake.geometric.trajectory import PHASE_NAMES  # noqa: E402
+from cake_drake.formats import PHASE_NAMES  # noqa: E402
 from cake_drake.learning.residual import describe, train_residual  # noqa: E402
 from cake_drake.pipeline import run  # noqa: E402
 from cake_drake.scenario import ComputedTorque, Generate, Scenario  # noqa: E402

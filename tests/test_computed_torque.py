@@ -11,8 +11,8 @@ import pytest
 
 from cake_drake.dynamic.analysis import settling, stationary_samples
 from cake_drake.dynamic.controllers import JointPd
+from cake_drake.formats import PHASE_NAMES
 from cake_drake.gains import study
-from cake_drake.geometric.trajectory import PHASE_NAMES
 from cake_drake.outputs.report import gravity_torques
 from cake_drake.pipeline import run
 from cake_drake.scenario import Recorded, Scenario

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from conftest import scenario
 
-from cake_drake.geometric.trajectory import load_npz
+from cake_drake.formats import load_npz
 from cake_drake.pipeline import run
 from cake_drake.symbolic import random_problem
 

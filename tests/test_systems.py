@@ -7,8 +7,9 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.analysis import Simulator
 
+from cake_drake.formats import PHASE_NAMES
 from cake_drake.geometric.ik import Kinematics, make_solver
-from cake_drake.geometric.trajectory import PHASE_NAMES, Timing
+from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
 from cake_drake.symbolic import GroundAction
 from cake_drake.systems import ActionCommand, PlanSource

@@ -8,15 +8,13 @@ import numpy as np
 import pytest
 
 from cake_drake.errors import InputError
+from cake_drake.formats import PHASE_NAMES, load_npz, save_npz
 from cake_drake.geometric.ik import Kinematics
 from cake_drake.geometric.trajectory import (
     GRIPPER_CLOSED,
     GRIPPER_OPEN,
-    PHASE_NAMES,
     JointTrajectory,
     Timing,
-    load_npz,
-    save_npz,
 )
 from cake_drake.world.scene import Q_HOME
 

@@ -20,14 +20,14 @@ from pydrake.systems.primitives import Demultiplexer, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from cake_drake.errors import InputError
-from cake_drake.geometric.trajectory import load_npz
+from cake_drake.formats import load_npz
 
 DIFFERENTIATORS = ("spline", "central")
 
 
 def _check_labels(path, n: int, gripper, phase, action, actions) -> None:
     """Refuse label and gripper arrays a replay could not follow, naming the array."""
-    from cake_drake.geometric.trajectory import PHASE_NAMES
+    from cake_drake.formats import PHASE_NAMES
 
     where = f"{path}: array"
     for name, a in (("gripper", gripper), ("phase", phase), ("action", action)):

@@ -14,25 +14,21 @@ instead of stopping at it. The overlap is ``blend`` of the shorter move at most,
 shrunk until the sum keeps within the same velocity and acceleration bounds; position,
 velocity and acceleration stay continuous. At most two moves are ever summed.
 
-``trajectory.npz`` (see :func:`save_npz`) holds, per sample:
+``trajectory.npz`` (see :func:`cake_drake.formats.save_npz`) holds, per sample:
 ``t`` (s), ``q``, ``qd``, ``qdd`` (7 arm joints: rad, rad/s, rad/s^2), ``gripper``
 (commanded opening of each finger, m), ``phase`` (index into ``phases``), ``action``
 (index into ``actions``; -1 when idle), plus ``phases`` and ``actions`` as strings.
 """
 
 import bisect
-import zipfile
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from cake_drake.arrays import npz_headers
-from cake_drake.errors import InputError
+from cake_drake.formats import PHASE_NAMES
 
 GRIPPER_OPEN = 0.04  # m per finger (8 cm between the fingers)
 GRIPPER_CLOSED = 0.0  # commanded shut: the cube stops the fingers, the PD squeezes
-PHASE_NAMES = ("idle", "pre-grasp", "grasp", "lift", "transport", "place", "retract")
 
 _V_PEAK = 1.875  # quintic: peak of ds/dtau
 _A_PEAK = 10.0 / np.sqrt(3.0)  # quintic: peak of |d2s/dtau2|
@@ -337,54 +333,3 @@ class JointTrajectory:
             "phase": phase.astype(np.int16),
             "action": action.astype(np.int16),
         }
-
-
-def save_npz(path: str | Path, samples: dict[str, np.ndarray], actions: list[str]) -> None:
-    """Write samples plus the phase and action names (whole, or not at all)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".part.npz")
-    np.savez_compressed(
-        tmp, **samples, phases=np.array(PHASE_NAMES), actions=np.array(actions, dtype=str)
-    )
-    tmp.replace(path)
-
-
-REQUIRED = ("t", "q", "gripper")
-
-
-def load_npz(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a ``trajectory.npz``; bad files give one clear line."""
-    path = Path(path)
-    expected = "expected a trajectory.npz written by python -m cake_drake.run"
-    npz_headers(path, expected)  # refused unread: not a file, too large, not an archive
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if not hasattr(data, "files"):  # a bare .npy array, not an archive
-                raise InputError(f"{path}: a single .npy array, not an .npz archive; {expected}")
-            out = {k: data[k] for k in data.files}
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file ({expected})") from None
-    except InputError:
-        raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, TypeError) as e:
-        raise InputError(f"{path}: not a readable .npz trajectory ({e}); {expected}") from None
-    numeric = [k for k in ("t", "q", "gripper") if k in out and out[k].dtype.kind not in "iuf"]
-    if numeric:
-        raise InputError(
-            f"{path}: array {numeric[0]!r} must hold numbers, not {out[numeric[0]].dtype}"
-        )
-    missing = [k for k in REQUIRED if k not in out]
-    if missing:
-        raise InputError(
-            f"{path}: missing array {missing[0]!r}; a trajectory needs {', '.join(REQUIRED)}"
-        )
-    t, q = out["t"], out["q"]
-    if q.ndim != 2 or q.shape[1] != 7 or len(t) != len(q) or len(t) < 4:
-        raise InputError(
-            f"{path}: q has shape {q.shape} for {len(t)} times; expected (N, 7) with N >= 4"
-        )
-    if not np.all(np.diff(t) > 0):
-        raise InputError(f"{path}: times in 't' must strictly increase")
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
-        raise InputError(f"{path}: 't' and 'q' must be finite numbers")
-    return out

@@ -17,9 +17,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from cake_drake.arrays import read_npz
 from cake_drake.dynamic.residual import FILE, Kinematics, ResidualModel, fit, samples
 from cake_drake.errors import InputError
+from cake_drake.formats import read_npz
 
 #: The share of each run's samples held out to measure the fit.
 HELD_OUT = 0.2
@@ -37,7 +37,7 @@ LOG_SHAPES = {
 
 
 def load_logs(run: Path) -> SimpleNamespace:
-    """A run folder's ``logs.npz``, checked by :func:`cake_drake.arrays.read_npz` (only what
+    """A run folder's ``logs.npz``, checked by :func:`cake_drake.formats.read_npz` (only what
     the residual reads, the rest refused by its headers if too large): seven joints, at
     least 10 samples, times that advance, finite numbers; one line otherwise."""
     path = Path(run) / "logs.npz" if Path(run).is_dir() else Path(run)

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from cake_drake.geometric.trajectory import PHASE_NAMES
+from cake_drake.formats import PHASE_NAMES
 
 PHASE_COLOURS = {
     "pre-grasp": "#dbe9f6",

@@ -10,7 +10,7 @@ from pydrake.math import RollPitchYaw
 
 from cake_drake.dynamic.controllers import TORQUE_LIMITS
 from cake_drake.errors import InputError, OutputError
-from cake_drake.geometric.trajectory import save_npz
+from cake_drake.formats import save_npz
 from cake_drake.outputs.files import OutputDir
 from cake_drake.outputs.replay import write_replay
 from cake_drake.outputs.worker import OutputWorker

@@ -248,7 +248,7 @@ class LearnedSkills(LeafSystem):
         state.get_mutable_abstract_state(self._state).set_value(prog)
         count = np.array([float(prog.done)])
         state.get_mutable_discrete_state(self._groups["actions_done"]).set_value(count)
-        # The phase a plot shades (geometric.trajectory.PHASE_NAMES): a skill has no phases
+        # The phase a plot shades (cake_drake.formats.PHASE_NAMES): a skill has no phases
         # of its own, so a pick is shaded as the classical pick's first (pre-grasp) and a
         # place as the classical place's first (transport); idle between actions.
         if prog.context is None:

@@ -34,7 +34,7 @@ from cake_drake.errors import InputError
 TABLE_X = (-0.25, 0.95)
 TABLE_Y = (-0.6, 0.6)
 BASE_CLEARANCE = 0.3  # m: nothing is set down closer than this to the robot's base
-LIFT, TRANSPORT = 3, 4  # phase indices (cake_drake.geometric.trajectory.PHASE_NAMES)
+LIFT, TRANSPORT = 3, 4  # phase indices (cake_drake.formats.PHASE_NAMES)
 
 
 @dataclass

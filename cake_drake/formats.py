@@ -1,4 +1,6 @@
-"""The one checked reader of the project's ``.npz`` files: trajectories and run logs.
+"""The project's own file formats, in one home read by every layer: the trajectory a run
+follows (``trajectory.npz``: :func:`save_npz`, :func:`load_npz`) and the phases it names,
+and the one checked reader of ``.npz`` files (trajectories and run logs).
 
 :func:`read_npz` refuses, before decompressing anything, a file over the input limit or
 whose arrays (all of them, by their npy headers) would decompress past
@@ -6,8 +8,7 @@ whose arrays (all of them, by their npy headers) would decompress past
 and checks each one's shape against the caller's expectation. Every failure is one
 :class:`InputError` line naming the file, the array and what would be valid; nothing
 is unpickled. The kinds' own checks (times that increase, seven joints) stay with their
-readers: :func:`cake_drake.geometric.trajectory.load_npz`,
-:func:`cake_drake.learning.residual.load_logs`.
+readers: :func:`load_npz` here, :func:`cake_drake.learning.residual.load_logs`.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
+
+PHASE_NAMES = ("idle", "pre-grasp", "grasp", "lift", "transport", "place", "retract")
 
 #: The most an .npz's arrays may hold once decompressed (a run's trajectory is ~1 MB).
 MAX_NPZ_ARRAY_BYTES = 256 * 2**20
@@ -103,3 +106,54 @@ def read_npz(path: str | Path, expected: str, shapes: Mapping[str, Shape]) -> di
             return {name: np.asarray(data[name]) for name in shapes}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise InputError(f"{path}: unreadable ({e}); {expected}") from None
+
+
+def save_npz(path: str | Path, samples: dict[str, np.ndarray], actions: list[str]) -> None:
+    """Write samples plus the phase and action names (whole, or not at all)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part.npz")
+    np.savez_compressed(
+        tmp, **samples, phases=np.array(PHASE_NAMES), actions=np.array(actions, dtype=str)
+    )
+    tmp.replace(path)
+
+
+REQUIRED = ("t", "q", "gripper")
+
+
+def load_npz(path: str | Path) -> dict[str, np.ndarray]:
+    """Read a ``trajectory.npz``; bad files give one clear line."""
+    path = Path(path)
+    expected = "expected a trajectory.npz written by python -m cake_drake.run"
+    npz_headers(path, expected)  # refused unread: not a file, too large, not an archive
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if not hasattr(data, "files"):  # a bare .npy array, not an archive
+                raise InputError(f"{path}: a single .npy array, not an .npz archive; {expected}")
+            out = {k: data[k] for k in data.files}
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such file ({expected})") from None
+    except InputError:
+        raise
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, TypeError) as e:
+        raise InputError(f"{path}: not a readable .npz trajectory ({e}); {expected}") from None
+    numeric = [k for k in ("t", "q", "gripper") if k in out and out[k].dtype.kind not in "iuf"]
+    if numeric:
+        raise InputError(
+            f"{path}: array {numeric[0]!r} must hold numbers, not {out[numeric[0]].dtype}"
+        )
+    missing = [k for k in REQUIRED if k not in out]
+    if missing:
+        raise InputError(
+            f"{path}: missing array {missing[0]!r}; a trajectory needs {', '.join(REQUIRED)}"
+        )
+    t, q = out["t"], out["q"]
+    if q.ndim != 2 or q.shape[1] != 7 or len(t) != len(q) or len(t) < 4:
+        raise InputError(
+            f"{path}: q has shape {q.shape} for {len(t)} times; expected (N, 7) with N >= 4"
+        )
+    if not np.all(np.diff(t) > 0):
+        raise InputError(f"{path}: times in 't' must strictly increase")
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
+        raise InputError(f"{path}: 't' and 'q' must be finite numbers")
+    return out
