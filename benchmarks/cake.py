@@ -8,6 +8,8 @@ eight in all, plus a whole-task policy's row when ``--whole-task CHECKPOINT`` na
 - ``problem_5``: the exercise's problem with its towers placed at random per seed
   (``learned_cake`` in models/scenarios/learning.yaml: 0.5 kg cubes, the residual's
   world), seeds 100000 and up; all eight rows;
+- ``problem_5_light``: the same episodes with the default cubes (0.05 kg, the skills'
+  demonstrations' world), the four symbolic x geometric rows under computed torque;
 - ``generated6``: generated six-cube problems in the default world, the four symbolic x
   geometric rows under computed torque.
 
@@ -39,6 +41,7 @@ SUITE = ROOT / "models" / "scenarios" / "learning.yaml"
 SKILLS = "package://cake_drake/policies/skills"
 RESIDUAL = "package://cake_drake/residuals/cubes_0.5kg"
 FIRST_SEED = 100000
+SETS = ("problem_5", "problem_5_light", "generated6")
 
 
 @dataclass(frozen=True)
@@ -67,13 +70,15 @@ def rows_for(set_name: str, whole_task: str | None) -> list[Row]:
 def scenario_for(set_name: str, row: Row, seed: int):
     """The episode's scenario: the set's problem and world, each layer as ``row`` says."""
     from cake_drake.scenario import ComputedTorque, Generate, Planned, Policy, load_scenario
+    from cake_drake.world.scene import WorldConfig
 
     s = load_scenario(SUITE, "learned_cake")
     s.seed = seed
     s.outputs.render = False
+    if set_name != "problem_5":  # the default cubes
+        s.world.cube_mass_kg = WorldConfig().cube_mass_kg
     if set_name == "generated6":
         s.task.generate = Generate(blocks=6, seed=seed)
-        s.world.cube_mass_kg = 0.08
         s.world.placement.xy = s.world.placement.yaw_deg = 0.0
     s.task.planner = "learned" if row.symbolic == "learned" else "auto"
     s.motion.skills = SKILLS if row.geometric == "learned" else ""
@@ -122,12 +127,14 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--episodes", type=int, default=50, help="episodes a row (default 50)")
-    ap.add_argument("--sets", nargs="+", default=["problem_5", "generated6"],
-                    choices=["problem_5", "generated6"])  # fmt: skip
+    ap.add_argument("--sets", nargs="+", default=list(SETS), choices=SETS)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--whole-task", metavar="CHECKPOINT",
                     help="a whole-task policy for problem_5 (e.g. trained on tower5)")  # fmt: skip
     ap.add_argument("--figure", type=Path, help="draw the success rates to this PNG")
+    ap.add_argument("--save", type=Path, metavar="JSON",
+                    help="keep each set's table here (a set run again replaces its own); "
+                    "the figure draws every set the file holds")  # fmt: skip
     args = ap.parse_args(argv)
     print(machine())
     seeds = list(range(FIRST_SEED, FIRST_SEED + args.episodes))
@@ -155,6 +162,13 @@ def main(argv=None) -> int:
                   f"{sim:.1f} | {wall:.1f} | {said} |", flush=True)  # fmt: skip
             table.append((row.label, wins, len(mine), lo, hi))
         tables[set_name] = table
+    if args.save:
+        import json
+
+        kept = json.loads(args.save.read_text()) if args.save.is_file() else {}
+        kept.update(tables)
+        args.save.write_text(json.dumps(kept, indent=1) + "\n")
+        tables = {k: kept[k] for k in SETS if k in kept}
     if args.figure:
         draw(tables, args.figure)
         print(f"\nfigure: {args.figure}")
@@ -167,7 +181,7 @@ def draw(tables: dict, path: Path) -> None:
     fig = Figure(figsize=(9, 1.2 + 0.42 * sum(len(t) for t in tables.values())), dpi=100)
     ax = fig.add_subplot(1, 1, 1)
     labels, y = [], 0
-    colours = {"problem_5": "#355f9c", "generated6": "#9c7434"}
+    colours = {"problem_5": "#355f9c", "problem_5_light": "#5a9c35", "generated6": "#9c7434"}
     for set_name, table in tables.items():
         for label, wins, n, lo, hi in table:
             rate = wins / n
