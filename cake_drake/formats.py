@@ -13,6 +13,7 @@ readers: :func:`load_npz` here, :func:`cake_drake.learning.residual.load_logs`.
 
 from __future__ import annotations
 
+import json
 import zipfile
 import zlib
 from collections.abc import Mapping
@@ -23,6 +24,20 @@ import numpy as np
 from cake_drake.errors import InputError
 
 PHASE_NAMES = ("idle", "pre-grasp", "grasp", "lift", "transport", "place", "retract")
+
+
+def read_json_mapping(path: str | Path, what: str) -> dict:
+    """A JSON file that holds a mapping (``what`` says whose, for the message): one line
+    naming the file otherwise."""
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise InputError(f"{path}: unreadable ({e})") from None
+    if not isinstance(data, dict):
+        raise InputError(f"{path}: holds a {type(data).__name__}, not a mapping ({what})")
+    return data
+
 
 #: The most an .npz's arrays may hold once decompressed (a run's trajectory is ~1 MB).
 MAX_NPZ_ARRAY_BYTES = 256 * 2**20

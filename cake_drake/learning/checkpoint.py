@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
+from cake_drake.formats import read_json_mapping
 
 #: Action size of each action space a checkpoint can answer in (a chunk is not learned).
 ACTION_SIZE = {"joint_position": 8, "ee_delta": 7}
@@ -103,13 +104,7 @@ def read_checkpoint(folder: Path) -> dict:
     actions). One line naming the file and the field otherwise, before anything is built."""
     folder = Path(folder)
     path = folder / "config.json"
-    try:
-        config = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: unreadable ({e})") from None
-    if not isinstance(config, dict):
-        raise InputError(f"{path}: holds a {type(config).__name__}, not a mapping (a LeRobot "
-                         "policy's config)")  # fmt: skip
+    config = read_json_mapping(path, "a LeRobot policy's config")
     if not isinstance(config.get("type"), str):
         raise InputError(f"{path}: field 'type' (the policy's kind) is missing")
     inputs = _feature_shapes(path, config, "input_features")

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
+from cake_drake.formats import read_json_mapping
 from cake_drake.policy.observations import (
     ENVIRONMENT_STATE_SIZE,
     GOAL_COLUMNS,
@@ -251,12 +252,7 @@ def read_info(root: Path) -> dict:
     data (and video) path templates, and features whose shapes are lists of positive
     integers, the action's as long as its names. One line naming the field otherwise."""
     path = Path(root) / "meta" / "info.json"
-    try:
-        info = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: unreadable ({e})") from None
-    if not isinstance(info, dict):
-        raise InputError(f"{path}: holds a {type(info).__name__}, not a mapping")
+    info = read_json_mapping(path, "a LeRobot dataset's metadata")
     fps = info.get("fps")
     if not (isinstance(fps, int | float) and not isinstance(fps, bool) and 0 < fps <= 1000):
         raise InputError(f"{path}: field 'fps' is {fps!r}; frames a second, more than 0")
@@ -292,13 +288,7 @@ def read_report(root: Path, required: bool = False) -> dict:
             raise InputError(f"{Path(root)}: no report.json; not a dataset written by "
                              "cake_drake.record")  # fmt: skip
         return {}
-    try:
-        report = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise InputError(f"{path}: unreadable ({e})") from None
-    if not isinstance(report, dict):
-        raise InputError(f"{path}: holds a {type(report).__name__}, not a mapping (as "
-                         "cake_drake.record writes it)")  # fmt: skip
+    report = read_json_mapping(path, "as cake_drake.record writes it")
     if not isinstance(report.get("training", {}), dict):
         raise InputError(f"{path}: field 'training' is not a mapping (the task's recipe)")
     return report
