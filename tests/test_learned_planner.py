@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cake_drake.errors import InputError, NoPlanError
-from cake_drake.learning.planner import PlannerRecipe, Space, export, train_planner
+from cake_drake.learning.planner import PlannerRecipe, Space, export, samples
 from cake_drake.symbolic import (
     BLOCKSWORLD_DOMAIN,
     NAMINGS,
@@ -217,8 +217,7 @@ def test_training_labels_are_exact(tmp_path):
     # Every optimal action leads one step closer, and the goal state is at distance 0.
     space = Space(4)
     assert len(space.states) == 125  # 73 arrangements with the arm empty, 52 holding one
-    data = train_planner.__globals__["samples"](PlannerRecipe(goals=8, states_per_goal=4),
-                                                log=lambda *_: None)  # fmt: skip
+    data = samples(PlannerRecipe(goals=8, states_per_goal=4), log=lambda *_: None)
     assert data and all(s.optimal.any() for s in data)
 
 
