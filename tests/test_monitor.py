@@ -124,3 +124,16 @@ def test_re_place_sets_a_loose_goal_stack_down_again_within_the_replan_budget():
     assert mended.execution.actions[5:10] == ("(stack c a)", *again)
     plain = run(heavy(False), write=False)
     assert not plain.execution.monitoring["events"] and not plain.success
+    # Every stack that left c on a measured where it landed (each time loose), and the
+    # same landing in the run without re-places.
+    places = mended.execution.monitoring["places"]
+    assert len(places) >= 2 and {p["action"] for p in places} == {"(stack c a)"}
+    assert all(p["offset_mm"] > 5.0 for p in places)
+    assert plain.execution.monitoring["places"][0]["offset_mm"] > 5.0
+
+
+def test_each_stack_is_measured_where_it_landed_and_a_classical_place_is_within_a_millimetre():
+    result = run(Scenario(), write=False)  # problem_5: c on d, b on c, a on b
+    places = result.execution.monitoring["places"]
+    assert [p["action"] for p in places] == ["(stack c d)", "(stack b c)", "(stack a b)"]
+    assert all(0.0 < p["offset_mm"] < 1.5 for p in places), places

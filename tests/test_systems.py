@@ -151,3 +151,58 @@ def test_the_reference_tape_changes_no_bit_of_a_run(monkeypatch, tmp_path):
     monkeypatch.setattr(WaypointIk, "_tape", lambda self, prog, t: Tape(0.01, 0, untaped, untaped))
     for s, with_tape in zip(cases, taped, strict=True):
         assert _outcome(run(s, write=False)) == _outcome(with_tape)
+
+
+def test_a_smoothed_reference_is_continuous_and_settles_on_each_target():
+    """A policy's or a skill's joint targets through the reference filter
+    (``settle_s``): position and velocity continuous when a new target comes, the
+    velocity the position's derivative, and within 2 % of the target after ``settle_s``."""
+    from pydrake.systems.framework import LeafSystem
+
+    from cake_drake.systems.waypoint_ik import declare_reference_ports, hold_target
+
+    settle = 0.2
+    targets = [np.full(7, 0.3)] * 3 + [np.full(7, -0.2)] * 3
+
+    class Steps(LeafSystem):
+        def __init__(self):
+            super().__init__()
+            self.groups = declare_reference_ports(self, np.zeros(7), settle)
+            self.DeclarePeriodicUnrestrictedUpdateEvent(0.1, 0.0, self.update)
+
+        def update(self, context, state):
+            k = min(int(round(context.get_time() / 0.1)), len(targets) - 1)
+            hold_target(self.groups, context, state, targets[k], settle)
+
+    system = Steps()
+    simulator = Simulator(system)
+    context = simulator.get_mutable_context()
+    port = system.GetOutputPort("desired_state")
+    times = np.arange(0.0, 0.6, 0.002)
+    rows = []
+    for t in times:
+        simulator.AdvanceTo(t)
+        rows.append(port.Eval(context).copy())
+    rows = np.array(rows)
+    q, v = rows[:, 0], rows[:, 7]
+    assert np.all(np.isfinite(rows))
+    # No jump in position or velocity when a new target comes (at 0.3 s): 0.2 ms either
+    # side, they differ by what the filter's acceleration (at most 6**2 / settle**2 times
+    # the move) makes of 0.4 ms.
+    simulator2 = Simulator(Steps())
+    around = []
+    for t in (0.2998, 0.3002):
+        simulator2.AdvanceTo(t)
+        around.append(simulator2.get_system().GetOutputPort("desired_state").Eval(
+            simulator2.get_context()).copy())  # fmt: skip
+    jump = np.abs(around[1] - around[0])
+    assert np.all(jump[:7] < 1e-3) and np.all(jump[7:] < 900 * 0.5 * 4e-4 + 1e-3), jump
+    # The velocity is the position's rate of change (away from the targets' times, where
+    # the acceleration changes and a difference quotient is not the derivative).
+    away = np.abs(times - np.round(times / 0.1) * 0.1) > 0.01
+    assert np.allclose(np.gradient(q, times)[away], v[away], atol=0.05)
+    # From rest, the first target is within 2 % of the move after settle_s, and stays.
+    at = np.searchsorted(times, settle)
+    before = np.searchsorted(times, 0.3)
+    assert np.all(np.abs(q[at:before] - 0.3) < 0.02 * 0.3), q[at:before]
+    assert np.allclose(system.GetOutputPort("desired_acceleration").Eval(context), 0.0)

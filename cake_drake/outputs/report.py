@@ -146,6 +146,8 @@ def summary(result) -> dict:
         "facts": [fact_str(f) for f in sorted(execution.reading.facts)],
         "unclassified": list(execution.reading.problems),
         "stack_offsets_mm": {k: round(v * 1000, 2) for k, v in sorted(execution.offsets.items())},
+        # Each stack as it landed, off the cube below (the monitor's, when its action ended).
+        "places": execution.monitoring.get("places", []),
         "sim_s": round(execution.sim_s, 3),
         "wall_s": round(wall, 3),
         "simulation_wall_s": round(execution.wall_s, 3),

@@ -6,6 +6,7 @@ import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
@@ -48,6 +49,9 @@ class MonitorState:
     #: many times in a row (MAX_TRIES stops the run).
     failing: GroundAction | None = None
     tries: int = 0
+    #: Each stack that left its cube on its support: (the action, the cube's horizontal
+    #: offset from the one below in m), measured when the action ended.
+    places: tuple[tuple[str, float], ...] = ()
 
     def __deepcopy__(self, memo):
         return self
@@ -201,6 +205,9 @@ class ExecutionMonitor(LeafSystem):
                 state, replace(s, error=f"the world cannot be recovered: {'; '.join(unread)}")
             )
             return
+        placed = self._placed(context, s, done, facts)
+        if placed is not None:
+            s = replace(s, places=s.places + (placed,))
         loose = self._loose(context) if self._re_place_loose else None
         if loose is not None and s.replans < self._max_replans:
             self._set(state, replace(self._re_place(s, t, done, facts, loose), seen=done))
@@ -230,6 +237,22 @@ class ExecutionMonitor(LeafSystem):
         if s.error is None and s.pos < len(s.plan):
             s = replace(s, emitted=s.emitted[:done] + (s.plan[s.pos],))
         self._set(state, replace(s, seen=done))
+
+    def _placed(self, context, s: MonitorState, done: int, facts) -> tuple[str, float] | None:
+        """The action just ended, if it stacked a cube that stands on its support now, and
+        that cube's horizontal offset from the one below (m); None otherwise."""
+        if not 0 < done <= len(s.emitted):
+            return None
+        action = s.emitted[done - 1]
+        canonical = self._roles.classify(action).canonical()
+        if canonical.name != "stack":
+            return None
+        cube, support = canonical.args
+        if ("on", cube, support) not in self._roles.to_canonical(facts):
+            return None
+        poses = self._poses_port.Eval(context)
+        offset = poses[self._bodies[cube]].translation() - poses[self._bodies[support]].translation()
+        return str(action), float(np.linalg.norm(offset[:2]))
 
     def _loose(self, context) -> tuple[str, str, float] | None:
         """The lowest goal ``on`` fact whose upper cube stands farther than :data:`LOOSE`

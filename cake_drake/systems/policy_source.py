@@ -45,7 +45,7 @@ from cake_drake.plugins import DURING, PluginError, guarded
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import Observation, environment_state, goal_table, pose7
 from cake_drake.scenario import ACT_BUDGET_S
-from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports
+from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports, hold_target
 from cake_drake.world.facts import GoalReading, read_goal
 
 
@@ -98,6 +98,7 @@ class PolicySource(LeafSystem):
         task: PolicyTask,
         stop_at_goal: bool = True,
         act_budget_s: float | None = ACT_BUDGET_S,
+        settle_s: float = 0.0,
     ) -> None:
         super().__init__()
         #: End the policy's run when the measured world shows the goal (as the Gym env's
@@ -119,7 +120,7 @@ class PolicySource(LeafSystem):
         #: its own, None: none (the Gym env's adapter, which only hands over a step).
         self._budget_s = getattr(policy, "act_budget_s", act_budget_s)
         self._box = spaces.bounds(space, self.options, *limits)  # the action's (low, high)
-        self._desired, self._fingers = np.zeros(14), np.zeros(4)
+        self._fingers = np.zeros(4)
         self._count, self._labels = np.zeros(1), np.zeros(2)
         self._written: tuple | None = None
         self._q = np.asarray(q_start, float).copy()
@@ -133,7 +134,8 @@ class PolicySource(LeafSystem):
             name: self.DeclareAbstractInputPort(f"image_{name}", AbstractValue.Make(ImageRgba8U()))
             for name in cameras
         }
-        self._groups = declare_reference_ports(self, self._q)
+        self._settle_s = settle_s
+        self._groups = declare_reference_ports(self, self._q, settle_s)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
 
     # --- what the policy sees -------------------------------------------------------
@@ -235,9 +237,8 @@ class PolicySource(LeafSystem):
         held = (self._q.tobytes(), self._width)
         if held != self._written:
             self._written = held
-            self._desired[:7] = self._q
             self._fingers[:2] = self._width / 2
-            state.get_mutable_discrete_state(self._groups["desired_state"]).set_value(self._desired)
+            hold_target(self._groups, context, state, self._q, self._settle_s)
             state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(self._fingers)
         self._count[0] = self.steps
         self._labels[1] = self.steps - 1
