@@ -57,10 +57,13 @@ minutes, steps/s and peak memory per row.
 then ``evaluate`` the skills in place of each task's demonstrator (the planner's plan, the
 execution monitor, the skills as the geometric layer), with the classical geometric
 layer on the same episodes beside each row; ``--sizes`` adds generated problems of those
-sizes, which no demonstration had. Each row says how often the monitor's repeats and
-replans rescued an episode.
+sizes, which no demonstration had. ``--skill-tasks`` names the recording tasks (``skills``:
+joint targets; ``skills_hand``: moves of the hand), ``--shipped`` adds the shipped skills.
+Each row says how often the monitor's repeats and replans rescued an episode, how far the
+stacks were set off the cube below (median/95th percentile) and the mean simulated time.
 
     python benchmarks/learning.py --skills 400 --tasks tower5 blocks3 --sizes 6 8
+    python benchmarks/learning.py --skills 800 --skill-tasks skills skills_hand --tasks tower5
 """
 
 from __future__ import annotations
@@ -345,48 +348,57 @@ def compare(task: str, policy: str, args) -> list[str]:
 
 
 def skills(args) -> None:
-    """Rows of learned skills under the planner, and the classical layer beside each."""
+    """Rows of learned skills under the planner, and the classical layer beside each: per
+    row, success, how the monitor's loop rescued episodes, how far each stack was set off
+    the cube below, and the simulated time."""
     from dataclasses import replace
 
     from cake_drake.learning.evaluation import evaluate as evaluate_here
     from cake_drake.learning.recording import spec_from_scenario
     from cake_drake.scenario import SKILL_POLICY, load_scenario
 
-    for demos in args.skills:
-        run, figures = trained("skills", "mlp", demos, args.work)
-        print(f"skills: mlp on observation.skill, {demos} demos, trained "
-              f"{figures['train_s'] / 60:.1f} min ({figures['steps'] / figures['train_s']:.1f} "
-              "steps/s)")  # fmt: skip
-        rows = [(task, None) for task in args.tasks] + [("blocks3", n) for n in args.sizes]
-        for task, size in rows:
-            name = f"{task}" if size is None else f"generated {size}"
-            print(name)
-            tag = task if size is None else f"generated{size}"
-            for label, path in (("skills", str(run)), ("classical", "")):
-                out = args.work / f"skills{demos}_{tag}_{label}" / "summary.json"
-                if not out.is_file():
-                    spec = replace(
-                        spec_from_scenario(load_scenario(LEARNING, task)),
-                        cameras=(),
-                        policy=SKILL_POLICY,
-                        options={"path": path, "device": "cpu"},
-                    )
-                    if size is not None:  # the budget scaled to each problem's plan
-                        spec = replace(spec, blocks=(size, size), problem=None, max_steps=0)
-                    seeds = [args.eval_seed + k for k in range(args.episodes)]
-                    _, summary = evaluate_here(spec, seeds, len(os.sched_getaffinity(0)))
-                    out.parent.mkdir(parents=True, exist_ok=True)
-                    out.write_text(json.dumps(summary, indent=2))
-                s = json.loads(out.read_text())
-                m = s["monitor"]
-                print(
-                    f"{row(label + ' (under the planner)', s)}  rescued "
-                    f"{m['rescued']}/{m['episodes_with_repeats_or_replans']}",
-                    flush=True,
+    checkpoints = [("shipped", ROOT / "models" / "policies" / "skills")] if args.shipped else []
+    for task in args.skill_tasks:
+        for demos in args.skills:
+            run, figures = trained(task, "mlp", demos, args.work)
+            space = load_scenario(LEARNING, task).reference.action_space
+            print(f"{task}: mlp on observation.skill answering {space}, {demos} demos, "
+                  f"trained {figures['train_s'] / 60:.1f} min "
+                  f"({figures['steps'] / figures['train_s']:.1f} steps/s)")  # fmt: skip
+            checkpoints.append((f"{task}{demos}", run))
+    rows = [(task, None) for task in args.tasks] + [("blocks3", n) for n in args.sizes]
+    for task, size in rows:
+        name = f"{task}" if size is None else f"generated {size}"
+        print(name)
+        tag = task if size is None else f"generated{size}"
+        for label, path in [*checkpoints, ("classical", "")]:
+            out = args.work / f"skills_{label}_{tag}" / "summary.json"
+            if not out.is_file():
+                spec = replace(
+                    spec_from_scenario(load_scenario(LEARNING, task)),
+                    cameras=(),
+                    policy=SKILL_POLICY,
+                    options={"path": str(path), "device": "cpu"},
                 )
-                why = {k: v for k, v in s["reasons"].items() if k != "goal reached"}
-                for reason, count in sorted(why.items(), key=lambda kv: -kv[1])[:3]:
-                    print(f"      {count} x {reason[:110]}")
+                if size is not None:  # the budget scaled to each problem's plan
+                    spec = replace(spec, blocks=(size, size), problem=None, max_steps=0)
+                seeds = [args.eval_seed + k for k in range(args.episodes)]
+                _, summary = evaluate_here(spec, seeds, len(os.sched_getaffinity(0)))
+                out.parent.mkdir(parents=True, exist_ok=True)
+                out.write_text(json.dumps(summary, indent=2))
+            s = json.loads(out.read_text())
+            m, places = s["monitor"], s.get("places") or {}
+            offsets = (f"stacks {places['median_mm']:.1f}/{places['p95_mm']:.1f} mm"
+                       if places.get("count") else "stacks -")  # fmt: skip
+            print(
+                f"{row(label, s)}  rescued {m['rescued']}/"
+                f"{m['episodes_with_repeats_or_replans']}  {offsets}  "
+                f"sim {s.get('mean_sim_s', float('nan')):.1f} s",
+                flush=True,
+            )
+            why = {k: v for k, v in s["reasons"].items() if k != "goal reached"}
+            for reason, count in sorted(why.items(), key=lambda kv: -kv[1])[:3]:
+                print(f"      {count} x {reason[:110]}")
 
 
 def failures(s: dict) -> str:
@@ -446,6 +458,14 @@ def main() -> None:
         help="learned skills under the planner from DEMOS demonstrations",
     )
     p.add_argument("--sizes", type=int, nargs="*", default=[], help="generated sizes (--skills)")
+    p.add_argument(
+        "--skill-tasks",
+        nargs="+",
+        default=["skills"],
+        help="--skills: the recording tasks trained (skills: joint targets; skills_hand: "
+        "moves of the hand)",
+    )
+    p.add_argument("--shipped", action="store_true", help="--skills: models/policies/skills too")
     p.add_argument(
         "--pixels",
         type=int,

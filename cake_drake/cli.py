@@ -1041,7 +1041,7 @@ def main_evaluate(argv: list[str] | None = None) -> int:
             _failures_picture([r for r in rows if not r["success"]], failed,
                               out.path("failures.png"))  # fmt: skip
         keys = ["seed", "blocks", "success", "steps", "wall_s", "reason", "task"]
-        keys += ["repeats", "replans"] if skills else ["missing"]
+        keys += ["repeats", "replans", "sim_s"] if skills else ["missing"]
         for r in rows if not skills else ():  # a column of text: "(on a b) (on b c)"
             r["missing"] = " ".join(r["missing"])
         out.path("results.parquet"), out.path("results.csv")  # declared, written below
@@ -1053,9 +1053,20 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     print(
         f"{args.policy}: {summary['success']}/{summary['episodes']} episodes reached the goal "
         f"({summary['rate']:.0%}, 95 % interval {lo:.0%} to {hi:.0%}); mean "
-        f"{summary['mean_steps']:.0f} steps; outputs in {args.out}/"
+        f"{summary['mean_steps']:.0f} steps{_places_text(summary)}; outputs in {args.out}/"
     )
     return EXIT_OK
+
+
+def _places_text(summary: dict) -> str:
+    """How far the skills set stacked cubes off the one below (under the planner)."""
+    places = summary.get("places") or {}
+    if not places.get("count"):
+        return ""
+    return (
+        f"; {places['count']} stacks set {places['median_mm']:.1f} mm off the cube below "
+        f"(median; 95th percentile {places['p95_mm']:.1f} mm)"
+    )
 
 
 def _is_skill(path: Path) -> bool:

@@ -78,7 +78,9 @@ class ReferenceSource:
         source = self.action_source
         if source is not None and hasattr(source, "state"):
             s = source.state(source.GetMyContextFromRoot(root_context))
-            found = {"events": list(s.events), "replans": s.replans, "checks": s.checks}
+            found = {"events": list(s.events), "replans": s.replans, "checks": s.checks,
+                     "places": [{"action": a, "offset_mm": round(o * 1000, 2)}
+                                for a, o in s.places]}  # fmt: skip
         if isinstance(self.geometric, LearnedSkills):
             prog = self.geometric.progress(self.geometric.GetMyContextFromRoot(root_context))
             found["skills"] = {
@@ -88,6 +90,9 @@ class ReferenceSource:
                 "budget_ran_out": prog.timed_out,
                 "steps": prog.total_steps,
                 "budget_steps": self.geometric.budget,
+                "action_space": self.geometric.space,
+                "clipped": self.geometric.counts.clipped,
+                "unreachable": self.geometric.counts.unreachable,
             }
         return found
 
@@ -183,7 +188,7 @@ def _add_reference(
     roles = blocksworld_roles(problem.domain)
     meaning = lambda action: roles.classify(action).canonical()  # noqa: E731
     if scenario.motion.skills:
-        geometric, solver = _add_skills(builder, scenario, indices, q_start, meaning), None
+        geometric, solver = _add_skills(builder, scenario, scene, indices, q_start, meaning), None
     else:
         geometric, solver = _add_waypoint_ik(
             builder, scenario, scene, indices, q_start, meaning, source.HasInputPort("infeasible")
@@ -253,9 +258,12 @@ def _add_waypoint_ik(builder, scenario, scene, indices, q_start, meaning, feedba
     return builder.AddNamedSystem("waypoint_ik", waypoint_ik), solver
 
 
-def _add_skills(builder, scenario, indices, q_start, meaning):
+def _add_skills(builder, scenario, scene, indices, q_start, meaning):
     """The learned geometric layer: a skill checkpoint executes each ground action
-    (its adapter through the plug-in door: nothing here imports the learning code)."""
+    (its adapter through the plug-in door: nothing here imports the learning code); a
+    skill that answers moves of the hand gets the damped least squares a policy's
+    ``ee_delta`` gets."""
+    from cake_drake.geometric.ik import DlsIk
     from cake_drake.plugins import guarded, load_attribute
     from cake_drake.scenario import SKILL_POLICY
     from cake_drake.systems.skills import DEFAULT_BUDGET, LearnedSkills
@@ -274,6 +282,8 @@ def _add_skills(builder, scenario, indices, q_start, meaning):
         motion.skill_max_steps or DEFAULT_BUDGET,
         meaning,
         motion.waypoints,
+        ik=DlsIk(Kinematics(scene.control_plant), max_iterations=50),
+        settle_s=motion.skill_settle_s,
     )
     return builder.AddNamedSystem("skills", system)
 
@@ -334,6 +344,7 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
             list(cameras),
             task,
             act_budget_s=ref.act_budget_s,
+            settle_s=ref.settle_s,
         ),
     )
     plant = scene.plant

@@ -318,8 +318,14 @@ def check_skills(motion) -> None:
     """A learned geometric layer that can run: a skill checkpoint (not a whole-task
     policy), a rate and a budget in range."""
     check_folder = load_attribute(SKILL_CHECK, "skill")
-    check_folder(resolve_path(motion.skills), motion.skill_device)
+    if motion.skill_action_space not in ("", "joint_position", "ee_delta"):
+        raise InputError(
+            f"motion.skill_action_space: {motion.skill_action_space!r}; one of joint_position, "
+            "ee_delta, or empty (the checkpoint's own)"
+        )
+    check_folder(resolve_path(motion.skills), motion.skill_device, motion.skill_action_space)
     _range(motion.skill_rate_hz, 0.5, 100.0, "motion.skill_rate_hz", " Hz")
+    _range(motion.skill_settle_s, 0.0, 5.0, "motion.skill_settle_s", " s")
     _range(motion.skill_max_steps, 0, 1_000_000, "motion.skill_max_steps")
 
 
@@ -355,6 +361,7 @@ def check_policy(ref: Policy, cameras=()) -> None:
     _range(ref.rate_hz, 0.5, 100.0, "reference.rate_hz", " Hz")
     _range(ref.max_steps, 0, 1_000_000, "reference.max_steps")
     _range(ref.act_budget_s, 0.1, 3600.0, "reference.act_budget_s", " s")
+    _range(ref.settle_s, 0.0, 5.0, "reference.settle_s", " s")
 
 
 #: Every file a run may write to its output folder.

@@ -108,6 +108,13 @@ class Motion:
     #: (0: 150, 15 s at 10 Hz).
     skill_max_steps: int = 0
     skill_device: str = "cpu"  # where the skill runs: cpu | cuda | auto
+    #: What the skill answers in (joint_position | ee_delta); empty: what its checkpoint
+    #: was trained on. A checkpoint of another space is refused before anything runs.
+    skill_action_space: str = ""
+    #: The skill's joint targets reach the controller through a critically damped filter
+    #: that settles on each in about this many seconds, continuous in position and
+    #: velocity; 0: as steps held until the next answer (how the skills were first run).
+    skill_settle_s: float = 0.0
 
 
 @dataclass
@@ -163,6 +170,10 @@ class Policy:
     #: run or the episode (exit 3). A Diffusion Policy's 100 denoising passes on a busy
     #: CPU want more than the default.
     act_budget_s: float = ACT_BUDGET_S
+    #: Each joint target reaches the controller through a critically damped filter that
+    #: settles on it in about this many seconds (continuous in position and velocity);
+    #: 0: held as a step until the next (see cake_drake.systems.waypoint_ik).
+    settle_s: float = 0.0
 
 
 @dataclass

@@ -362,3 +362,36 @@ def test_a_recording_rewritten_in_place_with_its_old_times_is_read_anew(recorded
     assert table.stat().st_mtime_ns == stat.st_mtime_ns and content_digest(ds) != digest
     after = np.asarray(read(ds).hf_dataset.with_format("numpy")["action"])
     np.testing.assert_allclose(after, 2 * before, rtol=1e-6)
+
+
+def test_a_learning_task_generates_what_its_scenario_says_or_refuses_it():
+    """``task.generate.tall`` reaches the episodes (few, tall towers); a generate field the
+    episodes cannot follow is one line, not silently dropped."""
+    from cake_drake.errors import InputError
+    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.pipeline import check
+    from cake_drake.scenario import Generate, Policy, Scenario
+    from cake_drake.symbolic.roles import blocksworld_view
+
+    def tallest(problem) -> int:
+        view = blocksworld_view(problem)
+        below = {f[1]: f[2] for f in view.init if f[0] == "on"}
+
+        def height(b: str) -> int:
+            return 1 + (height(below[b]) if b in below else 0)
+
+        return max(height(b) for b in view.blocks)
+
+    s = Scenario(reference=Policy(factory="cake_drake.learning.expert:make"))
+    heights = {}
+    for tall in (False, True):
+        s.task.generate = Generate(blocks=8, tall=tall)
+        spec = spec_from_scenario(s)
+        assert spec.tall is tall
+        env = spec.env()
+        heights[tall] = [tallest(check(env.episode_scenario(seed), write=False).problem)
+                         for seed in range(6)]  # fmt: skip
+    assert min(heights[True]) >= 3 and sum(heights[True]) > sum(heights[False]), heights
+    s.task.generate = Generate(blocks=5, partial=True)
+    with pytest.raises(InputError, match="task.generate.partial: a learning task's episodes"):
+        spec_from_scenario(s)

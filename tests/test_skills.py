@@ -55,6 +55,24 @@ def skill(recording, tmp_path_factory) -> Path:
     return out
 
 
+@pytest.fixture(scope="module")
+def hand_skill(tmp_path_factory) -> Path:
+    """A skill that answers moves of the hand (the skills_hand task: ee_delta), trained a
+    few steps on two demonstrations."""
+    base = tmp_path_factory.mktemp("hand")
+    r = cli("cake_drake.record", str(LEARNING), "--name", "skills_hand", "--episodes", "2",
+            "--no-cameras", "--workers", "1", "--out", str(base / "ds"))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "ee_delta" in r.stdout
+    r = cli("cake_drake.train", str(base / "ds"), "--out", str(base / "train"), "--steps", "20",
+            "--batch-size", "32")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    model = base / "train" / "checkpoints" / "last" / "pretrained_model"
+    config = json.loads((model / "config.json").read_text())
+    assert config["output_features"]["action"]["shape"] == [7]
+    return base / "train"
+
+
 def scenario_file(tmp_path: Path, body: str) -> Path:
     path = tmp_path / "scenario.yaml"
     path.write_text(body)
@@ -123,6 +141,97 @@ short:
     assert summary["layers"]["symbolic"]["kind"] == "classical"
     assert summary["skills"]["budget_ran_out"] == 3 and summary["skills"]["steps"] == 45
     assert summary["repeats"] == 3  # after each ending without its effects, the monitor repeats it
+
+
+def test_a_skill_that_moves_the_hand_runs_under_the_planner_and_in_evaluate(hand_skill, tmp_path):
+    path = scenario_file(tmp_path, f"""
+short:
+  task: {{problem: "package://cake_drake/pddl/stack2.pddl"}}
+  motion: {{skills: "{hand_skill}", skill_max_steps: 15, skill_settle_s: 0.2}}
+  outputs: {{render: false}}
+""")  # fmt: skip
+    out = tmp_path / "run"
+    r = cli("cake_drake.run", "--scenario", str(path), "--name", "short", "--out", str(out))
+    assert r.returncode == 3, r.stderr  # a few training steps do not pick a cube
+    assert "did not do (pick-up a) in 3 tries of 15 steps each" in r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["skills"]["action_space"] == "ee_delta" and summary["skills"]["steps"] == 45
+    # The hand moved: its joints are not where they started.
+    q = np.load(out / "trajectory.npz")["q"]
+    assert np.abs(q[-1] - q[0]).max() > 1e-3
+    r = cli("cake_drake.evaluate", str(hand_skill), "--suite", str(LEARNING), "--name",
+            "stack2", "--episodes", "1", "--seed", "100000", "--workers", "1", "--out",
+            str(tmp_path / "eval"))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "eval" / "summary.json").read_text())["episodes"] == 1
+
+
+def test_a_skill_run_as_another_action_space_is_refused_before_simulating(
+    skill, hand_skill, tmp_path
+):
+    for path, asked, trained in ((skill, "ee_delta", "joint_position"),
+                                 (hand_skill, "joint_position", "ee_delta")):  # fmt: skip
+        spec = scenario_file(tmp_path, f"""
+wrong:
+  motion: {{skills: "{path}", skill_action_space: {asked}}}
+""")  # fmt: skip
+        out = tmp_path / f"out_{asked}"
+        r = cli("cake_drake.run", "--scenario", str(spec), "--name", "wrong", "--out", str(out))
+        assert r.returncode == 2, r.stderr
+        line = r.stderr.strip()
+        assert len(line.splitlines()) == 1
+        assert f"a skill trained on {trained} actions" in line and f"give {trained}" in line
+        assert not out.exists()
+    spec = scenario_file(tmp_path, f'wrong:\n  motion: {{skills: "{skill}", skill_action_space: joints}}\n')
+    r = cli("cake_drake.run", "--scenario", str(spec), "--name", "wrong", "--out",
+            str(tmp_path / "x"))  # fmt: skip
+    assert r.returncode == 2 and "one of joint_position, ee_delta" in r.stderr, r.stderr
+
+
+def test_dagger_for_skills_labels_each_frame_with_the_action_under_way(hand_skill, tmp_path):
+    """One short round: the skills act under the expert's choice of action, the expert
+    labels every frame, and each frame says which ground action it belongs to."""
+    from cake_drake.policy.observations import SKILL_SCHEMAS
+
+    data, out = hand_skill.parent / "ds", tmp_path / "dagger"
+    r = cli("cake_drake.train", str(data), "--out", str(out), "--steps", "20", "--batch-size",
+            "32", "--dagger", "1", "--episodes-per-round", "1", "--round-steps", "20",
+            "--beta", "0.5", "--workers", "1")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    (row,) = json.loads((out / "train.json").read_text())["dagger"]["rounds"]
+    assert 0 < row["learner_frames"] < row["frames_added"]
+    (seed,) = row["seeds"]
+    with np.load(out / "rollouts" / f"ep_{seed}.npz") as z:
+        grounds, skills, actors = z["grounds"], z["skills"], z["actors"]
+        assert z["actions"].shape[1] == 7  # the teacher's labels, in the skill's ee_delta
+    under_way = grounds[:, 0] >= 0
+    assert under_way.sum() > 0.8 * len(grounds)
+    # The skill's one-hot names the same schema as the frame's ground action, learner's
+    # frames and expert's alike.
+    assert np.array_equal(np.argmax(skills[under_way, :4], axis=1), grounds[under_way, 0])
+    assert set(actors[under_way].tolist()) == {0, 1}
+    assert {SKILL_SCHEMAS[int(k)] for k in grounds[under_way, 0]} <= set(SKILL_SCHEMAS)
+    # The checkpoint of the last round is a skill, as any training's.
+    config = json.loads((out / "checkpoints/last/pretrained_model/config.json").read_text())
+    assert "observation.skill" in config["input_features"]
+
+
+def test_dagger_for_skills_with_a_teacher_that_cannot_label_per_action_is_refused(
+    hand_skill, tmp_path
+):
+    data = tmp_path / "ds"
+    shutil.copytree(hand_skill.parent / "ds", data)
+    report = json.loads((data / "report.json").read_text())
+    report["spec"]["policy"] = "examples.random_policy:make"
+    (data / "report.json").write_text(json.dumps(report))
+    r = cli("cake_drake.train", str(data), "--out", str(tmp_path / "d"), "--steps", "2",
+            "--dagger", "1", "--episodes-per-round", "1", "--workers", "1")  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    line = r.stderr.strip()
+    assert len(line.splitlines()) == 1
+    assert "examples.random_policy:make cannot say which ground action" in line
+    assert "skill_observation()" in line
+    assert not (tmp_path / "d").exists()
 
 
 def test_evaluate_runs_a_skill_checkpoint_under_the_named_scenarios_planner(skill, tmp_path):

@@ -132,6 +132,22 @@ def labeller(spec, beta: float) -> Teacher:
     return Teacher(spec.policy, options, float(beta))
 
 
+def check_skill_teacher(teacher: Teacher) -> None:
+    """A teacher for learned skills labels each frame with the ground action under way
+    (``skill_observation()``, as the closed-loop expert does); one line (exit 2) naming
+    what a teacher lacks otherwise."""
+    from cake_drake.systems.policy_source import make_policy
+
+    probe = make_policy(teacher.policy, teacher.options)
+    if not callable(getattr(probe, "skill_observation", None)):
+        raise InputError(
+            f"--dagger for skills: the teacher {teacher.policy} cannot say which ground "
+            "action is under way at each step (it has no skill_observation()); learned "
+            "skills are labelled per action: record with the closed-loop expert "
+            "(cake_drake.learning.expert:make)"
+        )
+
+
 def dagger(
     root: Path,
     out: Path,
@@ -152,18 +168,22 @@ def dagger(
     from cake_drake.learning import dataset
     from cake_drake.learning import train as training
     from cake_drake.learning.recording import _keep, _write_whole
+    from cake_drake.learning.skills import SKILL_LEARNER
     from cake_drake.scenario import CHECKPOINT_POLICY
 
     root, out = Path(root), Path(out)
     check_rounds(rounds, per_round, beta, round_steps)
     report, spec, demo_files = source(root)
     training.check(root, out, recipe, device, False)
-    if recipe.inputs != "state":
+    if recipe.inputs not in ("state", "skill"):
         raise InputError(
             f"--dagger with --inputs {recipe.inputs}: DAgger's rollouts record no images; "
-            "train with --inputs state"
+            "train with --inputs state (a whole-task policy) or skill (learned skills)"
         )
     dataset.require_lerobot()
+    teacher = labeller(spec, beta)
+    if recipe.inputs == "skill":
+        check_skill_teacher(teacher)
     demo_rows = [_row(f, s) for f, s in zip(demo_files, report["seeds"], strict=True)]
     tried = [int(s) for s in report["seeds"]] + [int(f["seed"]) for f in report.get("failed", [])]
     first = max(tried) + 1
@@ -175,13 +195,12 @@ def dagger(
     labelled = int(report["frames"])
     log(f"round 0: {recipe.policy} trained {recipe.steps} steps on {len(demo_files)} "
         f"demonstrations ({labelled} expert-labelled frames)")  # fmt: skip
-    teacher = labeller(spec, beta)
     kept_files, kept_rows, table, by_learner = [], [], [], 0
     phases = {"rollouts": 0.0, "writing": 0.0}  # seconds; the trainings' are added at the end
     for k in range(1, rounds + 1):
         learner = replace(
             spec,
-            policy=CHECKPOINT_POLICY,
+            policy=SKILL_LEARNER if recipe.inputs == "skill" else CHECKPOINT_POLICY,
             options={**spec.action_options(), "path": str(checkpoint.resolve()),
                      "device": device},
             cameras=(),

@@ -16,6 +16,8 @@ simulated seconds) and returns what the policy slot observes.
   camera) or ``state+rgb``.
 - ``placement``: ``(xy, yaw_deg)``, each tower's place jittered by up to ``xy`` m and each
   cube turned by up to ``yaw_deg`` per seed (the scenario's ``world.placement``).
+- ``tall``: generated problems of few, tall towers, start and goal (the scenario's
+  ``task.generate.tall``).
 - every argument is checked when the environment is made, by the same ``check`` a
   scenario gets, with the same field names.
 - a generated problem whose goal already holds is drawn again (the same seed always
@@ -131,6 +133,7 @@ class StackEnv(gymnasium.Env):
         options: dict | None = None,
         render_mode: str | None = None,
         placement: tuple[float, float] = (0.0, 0.0),
+        tall: bool = False,
     ) -> None:
         from cake_drake.geometric.ik import Kinematics
         from cake_drake.pipeline import check
@@ -153,6 +156,9 @@ class StackEnv(gymnasium.Env):
             )
         self.rate_hz, self.max_steps, self.time_step = rate_hz, int(max_steps), time_step
         self.placement = placement
+        if not isinstance(tall, bool):
+            raise InputError(f"tall = {tall!r:.40}: true or false")
+        self.tall = tall
         self.render_mode = render_mode
         # The same check a scenario gets, before make() returns: field names as a scenario's.
         self._checked_template = check(self._scenario(0, self.blocks[0]), write=False)
@@ -186,7 +192,7 @@ class StackEnv(gymnasium.Env):
         if self.problem is None:
             if blocks is None:
                 blocks = int(self.np_random.integers(self.blocks[0], self.blocks[1] + 1))
-            s.task.generate = Generate(blocks=blocks, seed=seed)
+            s.task.generate = Generate(blocks=blocks, seed=seed, tall=self.tall)
         else:
             s.task.problem = self.problem
         s.reference = Policy(

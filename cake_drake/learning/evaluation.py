@@ -85,4 +85,11 @@ def evaluate(
             "repeats": int(sum(r["repeats"] for r in rows)),
             "replans": int(sum(r["replans"] for r in rows)),
         }
+        places = [p for r in rows for p in r.get("places_mm", ())]
+        summary["places"] = {
+            "count": len(places),
+            "median_mm": float(np.median(places)) if places else None,
+            "p95_mm": float(np.percentile(places, 95)) if places else None,
+        }
+        summary["mean_sim_s"] = float(np.mean([r["sim_s"] for r in rows]))
     return rows, summary

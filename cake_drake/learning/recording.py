@@ -64,9 +64,19 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
     from cake_drake.world.cameras import default_cameras
 
     s = scenario
-    blocks, problem = (3, 8), None
+    blocks, problem, tall = (3, 8), None, False
     if s.task.generate is not None:
-        blocks = s.task.generate.blocks
+        g = s.task.generate
+        blocks, tall = g.blocks, g.tall
+        others = {"style": g.style != "exercise", "partial": g.partial,
+                  "max_height": g.max_height is not None,
+                  "goal_max_height": g.goal_max_height is not None}  # fmt: skip
+        unused = [name for name, set_ in others.items() if set_]
+        if unused:
+            raise InputError(
+                f"task.generate.{unused[0]}: a learning task's episodes are generated from "
+                "blocks and tall alone (one problem per seed); leave the others unset"
+            )
     elif s.task.problem:
         problem = str(resolve_path(s.task.problem))
     ref = s.reference
@@ -76,6 +86,7 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
         problem=problem,
         cameras=tuple(s.cameras or default_cameras()),
         placement=placement,
+        tall=tall,
     )
     if isinstance(ref, Policy):
         spec = replace(
@@ -306,6 +317,7 @@ def _spec_from_json(d: dict) -> EpisodeSpec:
         placement=tuple(d.get("placement", (0.0, 0.0))),
         noise=float(d.get("noise", 0.0)),
         act_budget_s=float(d.get("act_budget_s", ACT_BUDGET_S)),
+        tall=bool(d.get("tall", False)),
     )
 
 

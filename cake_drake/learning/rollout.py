@@ -91,6 +91,7 @@ class EpisodeSpec:
     policy: str = EXPERT
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
     placement: tuple[float, float] = (0.0, 0.0)  # world.placement: xy (m), yaw (degrees)
+    tall: bool = False  # generated problems of few, tall towers (task.generate.tall)
     noise: float = 0.0  # DART: noise added to the executed action (units: noise_scale)
     act_budget_s: float = ACT_BUDGET_S  # wall-clock budget of one answer of the policy
 
@@ -108,6 +109,7 @@ class EpisodeSpec:
             max_steps=self.max_steps,
             options=self.action_options(),
             placement=self.placement,
+            tall=self.tall,
         )
 
     @property

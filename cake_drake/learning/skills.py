@@ -23,13 +23,21 @@ from cake_drake.learning.checkpoint import (
 )
 from cake_drake.policy.observations import SKILL_SIZE
 
-#: The action a skill answers in: seven joint targets and the gripper's width.
-SKILL_ACTION = 8
+#: The action spaces a skill answers in, by the size of its action: seven joint targets
+#: and the gripper's width; or a move of the hand and the gripper.
+SKILL_ACTIONS = {8: "joint_position", 7: "ee_delta"}
 
 
-def check_folder(path: Path, device: str = "cpu") -> Path:
+def action_space_of(config: dict) -> str | None:
+    """The action space a skill checkpoint's config answers in (None: no skill's)."""
+    action = config.get("output_features", {}).get("action", {}).get("shape", [0])[0]
+    return SKILL_ACTIONS.get(action)
+
+
+def check_folder(path: Path, device: str = "cpu", action_space: str = "") -> Path:
     """Refuse, in one line, a folder that is no skill checkpoint: not a checkpoint, a
-    whole-task policy, another skill layout or action space, a device that is not here.
+    whole-task policy, another skill layout or action space (``action_space``: the one
+    the scenario asks for, empty for the checkpoint's own), a device that is not here.
     The model's folder."""
     from cake_drake.learning.dataset import require_lerobot
 
@@ -51,10 +59,17 @@ def check_folder(path: Path, device: str = "cpu") -> Path:
             f"{SKILL_SIZE} (pick-up, unstack, put-down, stack: train it again)"
         )
     action = config.get("output_features", {}).get("action", {}).get("shape", [0])[0]
-    if action != SKILL_ACTION:
+    space = action_space_of(config)
+    if space is None:
         raise InputError(
             f"{path}: the skill predicts {action} numbers an action; a skill answers in "
-            f"joint_position ({SKILL_ACTION}: 7 joints and the gripper)"
+            "joint_position (8: 7 joints and the gripper) or ee_delta (7: a move of the "
+            "hand and the gripper)"
+        )
+    if action_space and action_space != space:
+        raise InputError(
+            f"{path}: a skill trained on {space} actions ({action} numbers), run as "
+            f"motion.skill_action_space: {action_space}; leave it empty or give {space}"
         )
     check_device(device)
     return folder
@@ -62,12 +77,14 @@ def check_folder(path: Path, device: str = "cpu") -> Path:
 
 class CheckpointSkill:
     """The skill of a checkpoint folder: ``reset()`` at each new action, ``act`` a dict of
-    ``observation.state`` and ``observation.skill`` -> 8 numbers."""
+    ``observation.state`` and ``observation.skill`` -> an action in ``action_space`` (the
+    checkpoint's: 8 joint-position numbers, or 7 of ee_delta)."""
 
     def __init__(self, path: str, device: str = "cpu") -> None:
         from cake_drake.learning.mlp.acting import load
 
         self.folder = check_folder(Path(path), device)
+        self.action_space = action_space_of(_config(self.folder))
         # A perceptron acts on the CPU unless a GPU is asked for by name (see
         # cake_drake.learning.checkpoint): then no torch is imported.
         self.device = "cpu" if device == "auto" else device_for(device)
@@ -95,7 +112,7 @@ def episode(spec, seed: int) -> dict:
     again: ``re_place``) and the skills as the geometric layer
     (an empty path: the classical geometric layer, for the row beside it); its row (as
     :func:`cake_drake.learning.rollout.rollout`'s, with the monitor's repeats and
-    replans)."""
+    replans, the simulated time, and each stack's offset from the cube below)."""
     import time
 
     from cake_drake.pipeline import check, get_plan, run
@@ -132,4 +149,61 @@ def episode(spec, seed: int) -> dict:
         "repeats": sum(e.get("kind") == "repeat" for e in events),
         "replans": int(monitoring.get("replans", 0)),
         "budget": budget,
+        "sim_s": round(result.execution.sim_s, 2),
+        # Each stack's cube, off the one below when the action ended (mm).
+        "places_mm": [p["offset_mm"] for p in monitoring.get("places", [])],
     }
+
+
+class SkillsUnderExpert:
+    """DAgger's learner for skills: in the Gym env, the closed-loop expert chooses the
+    ground action from the measured world (its plan, its repairs) and the skill
+    checkpoint executes it: the states learned skills drift into, for the teacher to
+    label per action (:func:`cake_drake.learning.dagger.dagger` with ``--inputs skill``).
+    The skill's history is cleared when the action under way changes, as under the
+    planner (:class:`cake_drake.systems.skills.LearnedSkills`); while no action is under
+    way (waiting for the world to settle) the expert's own answer holds the hand."""
+
+    def __init__(self, path: str, device: str = "cpu") -> None:
+        from cake_drake.learning.expert import ClosedLoopExpert
+
+        self.skill = CheckpointSkill(path, device)
+        self.chooser = ClosedLoopExpert(max_repairs=None)
+        self._ground: tuple | None = None
+
+    def reset(self, task, seed: int) -> None:
+        if task.action_space != self.skill.action_space:
+            raise InputError(
+                f"{self.skill.folder}: a skill answering {self.skill.action_space}, rolled "
+                f"out in an env of {task.action_space} actions; record the task of its space"
+            )
+        self.chooser.reset(task, seed)
+        self._ground = None
+
+    @property
+    def reason(self) -> str | None:
+        return self.chooser.reason
+
+    def act(self, observation):
+        answer = self.chooser.act(observation)
+        if isinstance(answer, tuple):
+            if answer[0] is None:  # (None, True): the expert is done
+                return answer
+            answer = answer[0]
+        skill, ground = self.chooser.skill_observation()
+        if ground[0] < 0:
+            return answer
+        if tuple(ground) != self._ground:
+            self._ground = tuple(ground)
+            self.skill.reset()
+        state = np.asarray(observation["state"][:8], np.float32)
+        return self.skill.act({"observation.state": state, "observation.skill": skill})
+
+
+def under_expert(path: str, device: str = "cpu") -> SkillsUnderExpert:
+    """The factory of DAgger's skill learner (``SKILL_LEARNER``)."""
+    return SkillsUnderExpert(path, device)
+
+
+#: The learner DAgger rolls out for a skill checkpoint.
+SKILL_LEARNER = "cake_drake.learning.skills:under_expert"

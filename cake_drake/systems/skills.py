@@ -19,13 +19,25 @@
 The same ports as :class:`~cake_drake.systems.waypoint_ik.WaypointIk`: the action source
 (the planner's plan, the execution monitor) gives a ground action; where ``WaypointIk``
 would compute waypoints and IK, a learned skill is asked every ``1 / rate_hz`` simulated
-seconds for the arm's seven joint targets and the gripper's width, from the joints and
-the action's own numbers (``observation.skill``:
+seconds for its action, from the joints and the action's own numbers (``observation.skill``:
 :func:`cake_drake.policy.observations.skill_vector`, its targets fixed when the action
 starts as the classical layer fixes its waypoints). The skill is any object with
-``reset()`` (a new action: no history) and ``act(observation) -> 8 numbers``; a
-checkpoint's adapter is made through the plug-in door, so nothing here imports the
-learning code.
+``reset()`` (a new action: no history) and ``act(observation)``; a checkpoint's adapter
+is made through the plug-in door, so nothing here imports the learning code. Its
+``action_space`` (an attribute, default ``joint_position``) says what it answers
+(:mod:`cake_drake.policy.spaces`):
+
+- ``joint_position``: 8 numbers, the arm's seven joint targets and the gripper's width;
+- ``ee_delta``: 7 numbers, a move of the grasp frame from where it is measured (dx dy dz
+  in m, droll dpitch dyaw in rad, world axes) and the gripper (0 closed, 1 open): the
+  hand's frame, as the VLAs answer. The joints come from damped least squares
+  (:class:`cake_drake.geometric.ik.DlsIk`, seeded at the last target), as under the
+  demonstrator that recorded such a skill; a move it cannot reach keeps the last target.
+
+With ``settle_s`` > 0, the joint targets reach the controller through a critically
+damped filter that settles on each in about ``settle_s``
+(:func:`cake_drake.systems.waypoint_ik.declare_reference_ports`): the controller follows
+a motion, continuous in position and velocity, rather than a 10 Hz staircase.
 
 An action ends when its effects hold in the measured world (:func:`effects_hold`): a
 picked cube in the closed hand at the transit height, or a placed cube resting where
@@ -50,11 +62,17 @@ from pydrake.systems.framework import LeafSystem
 
 from cake_drake.errors import ExecutionError
 from cake_drake.plugins import DURING, guarded
+from cake_drake.policy import spaces
 from cake_drake.policy.observations import SkillContext, skill_context, skill_vector
 from cake_drake.scenario import ACT_BUDGET_S
 from cake_drake.symbolic import GroundAction
 from cake_drake.systems.plan_source import MAX_TRIES, ActionCommand, Refusal
-from cake_drake.systems.waypoint_ik import WorldIndices, declare_reference_ports
+from cake_drake.systems.waypoint_ik import (
+    WorldIndices,
+    declare_reference_ports,
+    hold_target,
+    reference_target,
+)
 from cake_drake.world.facts import read_facts
 from cake_drake.world.scene import CUBE_SIZE
 
@@ -63,6 +81,8 @@ LIFT_TOL = 0.02
 #: Control periods an action may take (15 s at 10 Hz) unless the scenario says.
 DEFAULT_BUDGET = 150
 GRIPPER_MAX = 0.08
+#: The action spaces a skill may answer in, and how many numbers each answer has.
+SKILL_SPACES = {"joint_position": 8, "ee_delta": 7}
 
 
 def effects_hold(
@@ -120,14 +140,26 @@ class LearnedSkills(LeafSystem):
         budget: int,
         meaning: Callable[[GroundAction], GroundAction],
         waypoints=None,
+        ik=None,
+        settle_s: float = 0.0,
     ) -> None:
         super().__init__()
         self.skill, self.label, self.world = skill, label, world
+        self.space = getattr(skill, "action_space", "joint_position")
+        if self.space not in SKILL_SPACES:
+            raise ExecutionError(
+                f"skill {label!r}: action_space {self.space!r}; a skill answers in "
+                f"{' or '.join(SKILL_SPACES)}"
+            )
+        if self.space == "ee_delta" and ik is None:
+            raise ValueError("an ee_delta skill needs an ik (DlsIk) to turn moves into joints")
+        self.ik, self.counts = ik, spaces.Counts()
         self.budget, self.meaning, self._params = budget, meaning, waypoints
         self._clearance = getattr(waypoints, "transit_clearance", 0.05)
         #: Wall-clock budget (s) of one answer (a skill may carry its own, as a policy does).
         self._budget_s = getattr(skill, "act_budget_s", ACT_BUDGET_S)
         self.period_s = 1.0 / rate_hz
+        self.settle_s = settle_s
         self._action = self.DeclareAbstractInputPort(
             "action", AbstractValue.Make(ActionCommand(0, None))
         )
@@ -137,7 +169,7 @@ class LearnedSkills(LeafSystem):
         self._arm = self.DeclareVectorInputPort("arm_state", 14)
         self._hand = self.DeclareVectorInputPort("hand_state", 4)
         self._state = self.DeclareAbstractState(AbstractValue.Make(SkillProgress()))
-        self._groups = declare_reference_ports(self, q_start)
+        self._groups = declare_reference_ports(self, q_start, self.settle_s)
         self.DeclareAbstractOutputPort(
             "infeasible",
             lambda: AbstractValue.Make(Refusal()),
@@ -188,20 +220,30 @@ class LearnedSkills(LeafSystem):
         # budget, stops the run in one line naming the skill.
         raw = guarded(f"skill {self.label!r}", self.skill.act, observation, exit_code=DURING,
                       budget_s=self._budget_s)  # fmt: skip
+        size = SKILL_SPACES[self.space]
         try:
             answer = np.asarray(raw, float).reshape(-1)
             shown = np.array2string(answer, precision=3)
         except (TypeError, ValueError):  # not numbers at all
             answer, shown = np.empty(0), repr(raw)
-        if answer.shape != (8,) or not np.all(np.isfinite(answer)):
+        if answer.shape != (size,) or not np.all(np.isfinite(answer)):
+            what = ("7 joint targets, the gripper's width" if size == 8
+                    else "a move of the hand, dx dy dz droll dpitch dyaw, and the gripper")  # fmt: skip
             raise ExecutionError(
                 f"skill {self.label!r} answered {shown[:60]} "
-                f"for {prog.action} (action {prog.working + 1}); a skill answers 8 finite "
-                "numbers (7 joint targets, the gripper's width)"
+                f"for {prog.action} (action {prog.working + 1}); a {self.space} skill "
+                f"answers {size} finite numbers ({what})"
             )
-        width = float(np.clip(answer[7], 0.0, GRIPPER_MAX))
-        desired = np.r_[answer[:7], np.zeros(7)]
-        state.get_mutable_discrete_state(self._groups["desired_state"]).set_value(desired)
+        if self.space == "ee_delta":
+            low, high = spaces.bounds("ee_delta", {}, None, None)
+            move = np.clip(answer, low, high)
+            self.counts.clipped += int(not np.array_equal(move, answer))
+            last = reference_target(self._groups, context)
+            q = spaces.ee_target(move[:6], X_WG, self.ik, last, self.counts)
+            target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
+        else:
+            target, width = answer[:7], float(np.clip(answer[7], 0.0, GRIPPER_MAX))
+        hold_target(self._groups, context, state, target, self.settle_s)
         fingers = np.array([width / 2, width / 2, 0.0, 0.0])
         state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
         self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))
