@@ -58,12 +58,14 @@ then ``evaluate`` the skills in place of each task's demonstrator (the planner's
 execution monitor, the skills as the geometric layer), with the classical geometric
 layer on the same episodes beside each row; ``--sizes`` adds generated problems of those
 sizes, which no demonstration had. ``--skill-tasks`` names the recording tasks (``skills``:
-joint targets; ``skills_hand``: moves of the hand), ``--shipped`` adds the shipped skills.
+joint targets; ``skills_hand``: moves of the hand), ``--shipped`` adds the shipped skills,
+as trained and with their action chunks ensembled (``motion.skill_ensemble``).
 Each row says how often the monitor's repeats and replans rescued an episode, how far the
 stacks were set off the cube below (median/95th percentile) and the mean simulated time.
 
     python benchmarks/learning.py --skills 400 --tasks tower5 blocks3 --sizes 6 8
     python benchmarks/learning.py --skills 800 --skill-tasks skills skills_hand --tasks tower5
+    python benchmarks/learning.py --skills 800 --skill-tasks skills_hand+skills_hand_tall:300
 """
 
 from __future__ import annotations
@@ -208,16 +210,56 @@ def recipe_tag(task: str, policy: str | None = None) -> str:
 
 def demonstrations(task: str, demos: int, work: Path) -> Path:
     """A dataset of the first ``demos`` seeds' kept demonstrations of ``task`` (taken from
-    its pool, recorded if absent), carrying the task's recipe as learning.yaml has it."""
+    its pool, recorded if absent; the task's episodes start at its scenario's seed),
+    carrying the task's recipe as learning.yaml has it."""
+    from cake_drake.scenario import load_scenario
+
     pool = recorded(task, demos, work)
     data = work / f"{task}_demos{demos}_{recipe_tag(task)}"
-    subset(pool, data, seeds_below=demos)
+    subset(pool, data, seeds_below=load_scenario(LEARNING, task).seed + demos)
     return data
+
+
+def mixed(parts: list[tuple[str, int]], work: Path) -> Path:
+    """One dataset of several tasks' demonstrations (``parts``: each task and how many of
+    its first seeds), its report the first task's (its spec, its recipe) with every
+    episode counted; made once."""
+    from cake_drake.learning import dataset
+    from cake_drake.learning.recording import _load
+
+    tag = "+".join(f"{task}{n}" for task, n in parts)
+    out = work / f"{tag}_{recipe_tag(parts[0][0])}"
+    if (out / "report.json").is_file():
+        return out
+    sources = [demonstrations(task, n, work) for task, n in parts]
+    reports = [json.loads((src / "report.json").read_text()) for src in sources]
+    files = [(src, seed) for src, r in zip(sources, reports, strict=True) for seed in r["seeds"]]
+    rows = [json.loads((src / "episodes" / f"ep_{seed}.json").read_text()) for src, seed in files]
+    episodes = (_load(src / "episodes" / f"ep_{seed}.npz", row, images=False)
+                for (src, seed), row in zip(files, rows, strict=True))  # fmt: skip
+    first = reports[0]
+    written = dataset.write(out, episodes, first["fps"], first["control_mode"], ())
+    (out / "episodes").mkdir()
+    for src, seed in files:
+        for name in (f"ep_{seed}.npz", f"ep_{seed}.json"):
+            os.link(src / "episodes" / name, out / "episodes" / name)
+    report = {**first, "episodes": len(rows), "frames": written, "seeds": [s for _, s in files],
+              "failed": [f for r in reports for f in r.get("failed", [])],
+              "tried": sum(r["tried"] for r in reports), "parts": [list(p) for p in parts]}  # fmt: skip
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    return out
 
 
 def trained(task: str, policy: str, demos: int, work: Path) -> tuple[Path, dict]:
     """The checkpoint of ``policy`` on ``demos`` demonstrations of ``task`` (made if absent),
-    and the training's figures."""
+    and the training's figures. ``task`` may join several tasks' demonstrations,
+    ``TASK+TASK:N``: the first's ``demos``, then N of each other (:func:`mixed`)."""
+    if "+" in task:
+        first, *others = task.split("+")
+        parts = [(first, demos)] + [(t.split(":")[0], int(t.split(":")[1])) for t in others]
+        data = mixed(parts, work)
+        run = work / f"{data.name}_{policy}"
+        return run, train_once(data, run, policy)
     data = demonstrations(task, demos, work)
     run = work / f"{task}_{policy}_demos{demos}_{recipe_tag(task, policy)}"
     return run, train_once(data, run, policy)
@@ -357,28 +399,32 @@ def skills(args) -> None:
     from cake_drake.learning.recording import spec_from_scenario
     from cake_drake.scenario import SKILL_POLICY, load_scenario
 
-    checkpoints = [("shipped", ROOT / "models" / "policies" / "skills")] if args.shipped else []
+    shipped = ROOT / "models" / "policies" / "skills"
+    # Each checkpoint as trained (its chunk's first actions open loop, then a new chunk),
+    # and the shipped one also with its chunks ensembled (motion.skill_ensemble).
+    checkpoints = ([("shipped", shipped, 0.0), ("shipped, ensembled", shipped, 0.01)]
+                   if args.shipped else [])  # fmt: skip
     for task in args.skill_tasks:
         for demos in args.skills:
             run, figures = trained(task, "mlp", demos, args.work)
-            space = load_scenario(LEARNING, task).reference.action_space
+            space = load_scenario(LEARNING, task.split("+")[0]).reference.action_space
             print(f"{task}: mlp on observation.skill answering {space}, {demos} demos, "
                   f"trained {figures['train_s'] / 60:.1f} min "
                   f"({figures['steps'] / figures['train_s']:.1f} steps/s)")  # fmt: skip
-            checkpoints.append((f"{task}{demos}", run))
+            checkpoints.append((f"{task.replace(':', '')}{demos}", run, 0.0))
     rows = [(task, None) for task in args.tasks] + [("blocks3", n) for n in args.sizes]
     for task, size in rows:
         name = f"{task}" if size is None else f"generated {size}"
         print(name)
         tag = task if size is None else f"generated{size}"
-        for label, path in [*checkpoints, ("classical", "")]:
-            out = args.work / f"skills_{label}_{tag}" / "summary.json"
+        for label, path, ensemble in [*checkpoints, ("classical", "", 0.0)]:
+            out = args.work / f"skills_{label.replace(', ', '_')}_{tag}" / "summary.json"
             if not out.is_file():
                 spec = replace(
                     spec_from_scenario(load_scenario(LEARNING, task)),
                     cameras=(),
                     policy=SKILL_POLICY,
-                    options={"path": str(path), "device": "cpu"},
+                    options={"path": str(path), "device": "cpu", "ensemble": ensemble},
                 )
                 if size is not None:  # the budget scaled to each problem's plan
                     spec = replace(spec, blocks=(size, size), problem=None, max_steps=0)
@@ -463,7 +509,7 @@ def main() -> None:
         nargs="+",
         default=["skills"],
         help="--skills: the recording tasks trained (skills: joint targets; skills_hand: "
-        "moves of the hand)",
+        "moves of the hand; skills_hand+skills_hand_tall:300: with 300 tall-tower ones)",
     )
     p.add_argument("--shipped", action="store_true", help="--skills: models/policies/skills too")
     p.add_argument(
@@ -479,7 +525,7 @@ def main() -> None:
     args.work.mkdir(parents=True, exist_ok=True)
     print(machine())
     print(f"held-out seeds {args.eval_seed}..{args.eval_seed + args.episodes - 1}")
-    if args.skills:
+    if args.skills or args.shipped:
         skills(args)
         return
     if args.pixels:

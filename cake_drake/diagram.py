@@ -272,7 +272,7 @@ def _add_skills(builder, scenario, scene, indices, q_start, meaning):
     label = portable_path(motion.skills)
     path = str(resolve_path(motion.skills))
     skill = guarded(f"skill {label!r}", load_attribute(SKILL_POLICY, "skill"), path,
-                    motion.skill_device)  # fmt: skip
+                    motion.skill_device, motion.skill_ensemble)  # fmt: skip
     system = LearnedSkills(
         skill,
         label,
@@ -283,7 +283,7 @@ def _add_skills(builder, scenario, scene, indices, q_start, meaning):
         meaning,
         motion.waypoints,
         ik=DlsIk(Kinematics(scene.control_plant), max_iterations=50),
-        settle_s=motion.skill_settle_s,
+        smooth_s=motion.skill_smooth_s,
     )
     return builder.AddNamedSystem("skills", system)
 
@@ -344,7 +344,7 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
             list(cameras),
             task,
             act_budget_s=ref.act_budget_s,
-            settle_s=ref.settle_s,
+            smooth_s=ref.smooth_s,
         ),
     )
     plant = scene.plant

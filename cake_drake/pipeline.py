@@ -315,18 +315,25 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
 
 
 def check_skills(motion) -> None:
-    """A learned geometric layer that can run: a skill checkpoint (not a whole-task
-    policy), a rate and a budget in range."""
+    """A learned geometric layer that can run: its numbers in range, then a skill
+    checkpoint (not a whole-task policy) of the action space asked for, where it can run."""
     check_folder = load_attribute(SKILL_CHECK, "skill")
     if motion.skill_action_space not in ("", "joint_position", "ee_delta"):
         raise InputError(
             f"motion.skill_action_space: {motion.skill_action_space!r}; one of joint_position, "
             "ee_delta, or empty (the checkpoint's own)"
         )
-    check_folder(resolve_path(motion.skills), motion.skill_device, motion.skill_action_space)
     _range(motion.skill_rate_hz, 0.5, 100.0, "motion.skill_rate_hz", " Hz")
-    _range(motion.skill_settle_s, 0.0, 5.0, "motion.skill_settle_s", " s")
+    _range(motion.skill_smooth_s, 0.0, 5.0, "motion.skill_smooth_s", " s")
+    _range(motion.skill_ensemble, 0.0, 10.0, "motion.skill_ensemble")
     _range(motion.skill_max_steps, 0, 1_000_000, "motion.skill_max_steps")
+    if motion.skill_ensemble > 0 and motion.skill_device != "cpu":
+        raise InputError(
+            f"motion.skill_ensemble = {motion.skill_ensemble:g} with skill_device "
+            f"{motion.skill_device}: the ensembled skill acts in NumPy on the CPU; set "
+            "skill_device: cpu, or skill_ensemble: 0"
+        )
+    check_folder(resolve_path(motion.skills), motion.skill_device, motion.skill_action_space)
 
 
 def check_policy(ref: Policy, cameras=()) -> None:
@@ -361,7 +368,7 @@ def check_policy(ref: Policy, cameras=()) -> None:
     _range(ref.rate_hz, 0.5, 100.0, "reference.rate_hz", " Hz")
     _range(ref.max_steps, 0, 1_000_000, "reference.max_steps")
     _range(ref.act_budget_s, 0.1, 3600.0, "reference.act_budget_s", " s")
-    _range(ref.settle_s, 0.0, 5.0, "reference.settle_s", " s")
+    _range(ref.smooth_s, 0.0, 5.0, "reference.smooth_s", " s")
 
 
 #: Every file a run may write to its output folder.

@@ -114,7 +114,12 @@ class Motion:
     #: The skill's joint targets reach the controller through a critically damped filter
     #: that settles on each in about this many seconds, continuous in position and
     #: velocity; 0: as steps held until the next answer (how the skills were first run).
-    skill_settle_s: float = 0.0
+    skill_smooth_s: float = 0.0
+    #: ACT's temporal ensembling of the skill's action chunks: a chunk predicted every
+    #: control period, each action the mean of every chunk's prediction for it, the older
+    #: weighted exp(-skill_ensemble * i) (i = 0 the oldest); 0: a chunk's first actions
+    #: executed open loop, then a new chunk (how the skills were trained).
+    skill_ensemble: float = 0.01
 
 
 @dataclass
@@ -173,7 +178,7 @@ class Policy:
     #: Each joint target reaches the controller through a critically damped filter that
     #: settles on it in about this many seconds (continuous in position and velocity);
     #: 0: held as a step until the next (see cake_drake.systems.waypoint_ik).
-    settle_s: float = 0.0
+    smooth_s: float = 0.0
 
 
 @dataclass

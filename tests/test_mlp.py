@@ -244,6 +244,30 @@ def test_numpy_acting_is_the_networks_arithmetic(tmp_path, n_obs_steps):
         )
 
 
+def test_temporal_ensembling_averages_every_live_chunks_prediction_for_the_step(tmp_path):
+    """ACT's temporal ensembling: a chunk predicted at every step, the action the mean of
+    every chunk still covering this step, weighted exp(-m * i) with i = 0 the oldest."""
+    from cake_drake.learning.mlp.acting import NumpyChunks, load
+
+    p = policy(n_obs_steps=1, chunk_size=4, n_action_steps=2)
+    p.save_pretrained(tmp_path)
+    m = 0.5
+    acting = load(tmp_path, "cpu", ensemble=m)
+    plain = NumpyChunks(tmp_path)
+    frames = [{k: v.numpy() for k, v in batch(n=1, seed=20 + k).items()} for k in range(7)]
+    chunks = [plain.predict_action_chunk(f)[0] for f in frames]
+    for t, frame in enumerate(frames):
+        live = [(s, chunks[s][t - s]) for s in range(max(0, t - 3), t + 1)]  # oldest first
+        weights = np.exp(-m * np.arange(len(live)))
+        want = sum(w * a for w, (_, a) in zip(weights, live, strict=True)) / weights.sum()
+        np.testing.assert_allclose(acting.select_action(frame)[0], want, rtol=1e-5, atol=1e-6)
+    acting.reset()  # a new action: nothing of the last one's chunks
+    np.testing.assert_allclose(acting.select_action(frames[3])[0], chunks[3][0], rtol=1e-5,
+                               atol=1e-6)  # fmt: skip
+    with pytest.raises(ValueError, match="temporal ensembling acts in NumPy"):
+        load(tmp_path, "cuda", ensemble=m)
+
+
 def test_a_run_with_the_shipped_state_policy_imports_no_torch(tmp_path):
     import subprocess
     import sys

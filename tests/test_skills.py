@@ -147,7 +147,7 @@ def test_a_skill_that_moves_the_hand_runs_under_the_planner_and_in_evaluate(hand
     path = scenario_file(tmp_path, f"""
 short:
   task: {{problem: "package://cake_drake/pddl/stack2.pddl"}}
-  motion: {{skills: "{hand_skill}", skill_max_steps: 15, skill_settle_s: 0.2}}
+  motion: {{skills: "{hand_skill}", skill_max_steps: 15, skill_smooth_s: 0.2}}
   outputs: {{render: false}}
 """)  # fmt: skip
     out = tmp_path / "run"
@@ -232,6 +232,22 @@ def test_dagger_for_skills_with_a_teacher_that_cannot_label_per_action_is_refuse
     assert "examples.random_policy:make cannot say which ground action" in line
     assert "skill_observation()" in line
     assert not (tmp_path / "d").exists()
+
+
+def test_skill_settings_that_cannot_work_are_refused_before_simulating(tmp_path):
+    for motion, words in (
+        ("skill_ensemble: 0.01, skill_device: cuda", "the ensembled skill acts in NumPy on the CPU"),
+        ("skill_ensemble: -1", "motion.skill_ensemble = -1.0 is outside 0 to 10"),
+        ("skill_smooth_s: 9", "motion.skill_smooth_s = 9.0 is outside 0 to 5 s"),
+    ):  # fmt: skip
+        spec = scenario_file(tmp_path, f"""
+bad:
+  motion: {{skills: "package://cake_drake/policies/skills", {motion}}}
+""")  # fmt: skip
+        out = tmp_path / "out"
+        r = cli("cake_drake.run", "--scenario", str(spec), "--name", "bad", "--out", str(out))
+        assert r.returncode == 2 and words in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and not out.exists()
 
 
 def test_evaluate_runs_a_skill_checkpoint_under_the_named_scenarios_planner(skill, tmp_path):

@@ -155,8 +155,8 @@ def test_the_reference_tape_changes_no_bit_of_a_run(monkeypatch, tmp_path):
 
 def test_a_smoothed_reference_is_continuous_and_settles_on_each_target():
     """A policy's or a skill's joint targets through the reference filter
-    (``settle_s``): position and velocity continuous when a new target comes, the
-    velocity the position's derivative, and within 2 % of the target after ``settle_s``."""
+    (``smooth_s``): position and velocity continuous when a new target comes, the
+    velocity the position's derivative, and within 2 % of the target after ``smooth_s``."""
     from pydrake.systems.framework import LeafSystem
 
     from cake_drake.systems.waypoint_ik import declare_reference_ports, hold_target
@@ -201,7 +201,7 @@ def test_a_smoothed_reference_is_continuous_and_settles_on_each_target():
     # the acceleration changes and a difference quotient is not the derivative).
     away = np.abs(times - np.round(times / 0.1) * 0.1) > 0.01
     assert np.allclose(np.gradient(q, times)[away], v[away], atol=0.05)
-    # From rest, the first target is within 2 % of the move after settle_s, and stays.
+    # From rest, the first target is within 2 % of the move after smooth_s, and stays.
     at = np.searchsorted(times, settle)
     before = np.searchsorted(times, 0.3)
     assert np.all(np.abs(q[at:before] - 0.3) < 0.02 * 0.3), q[at:before]

@@ -80,7 +80,7 @@ class CheckpointSkill:
     ``observation.state`` and ``observation.skill`` -> an action in ``action_space`` (the
     checkpoint's: 8 joint-position numbers, or 7 of ee_delta)."""
 
-    def __init__(self, path: str, device: str = "cpu") -> None:
+    def __init__(self, path: str, device: str = "cpu", ensemble: float = 0.0) -> None:
         from cake_drake.learning.mlp.acting import load
 
         self.folder = check_folder(Path(path), device)
@@ -88,7 +88,7 @@ class CheckpointSkill:
         # A perceptron acts on the CPU unless a GPU is asked for by name (see
         # cake_drake.learning.checkpoint): then no torch is imported.
         self.device = "cpu" if device == "auto" else device_for(device)
-        self.network = load(self.folder, self.device)
+        self.network = load(self.folder, self.device, ensemble)
 
     def reset(self) -> None:
         self.network.reset()
@@ -100,9 +100,10 @@ class CheckpointSkill:
         return self.network.select_action(batch)[0].astype(np.float64)
 
 
-def make(path: str, device: str = "cpu") -> CheckpointSkill:
-    """The plug-in's factory (``motion.skills``: a checkpoint folder)."""
-    return CheckpointSkill(path, device)
+def make(path: str, device: str = "cpu", ensemble: float = 0.0) -> CheckpointSkill:
+    """The plug-in's factory (``motion.skills``: a checkpoint folder; ``ensemble``:
+    ``motion.skill_ensemble``)."""
+    return CheckpointSkill(path, device, ensemble)
 
 
 def episode(spec, seed: int) -> dict:
@@ -127,6 +128,8 @@ def episode(spec, seed: int) -> dict:
     motion = scenario.motion
     motion.skills = str(spec.options.get("path") or "")
     motion.skill_device = str(spec.options.get("device", "cpu"))
+    if "ensemble" in spec.options:
+        motion.skill_ensemble = float(spec.options["ensemble"])
     motion.skill_rate_hz = spec.rate_hz
     # The whole-task policy's budget for the same episode (steps of the same rate).
     n_actions = len(get_plan(check(scenario, write=False)).actions)
@@ -167,7 +170,10 @@ class SkillsUnderExpert:
     def __init__(self, path: str, device: str = "cpu") -> None:
         from cake_drake.learning.expert import ClosedLoopExpert
 
-        self.skill = CheckpointSkill(path, device)
+        from cake_drake.scenario import Motion
+
+        # Acting as it does under the planner, its chunks ensembled as a run's are.
+        self.skill = CheckpointSkill(path, device, Motion.skill_ensemble)
         self.chooser = ClosedLoopExpert(max_repairs=None)
         self._ground: tuple | None = None
 

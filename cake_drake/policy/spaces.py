@@ -26,7 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from cake_drake.errors import InputError
 from cake_drake.plugins import DURING, PluginError
@@ -176,11 +176,23 @@ def checked(action, name: str, options: dict, label: str, lower, upper, counts: 
 
 
 def ee_target(
-    delta: np.ndarray, X_WG: RigidTransform, ik, q_seed: np.ndarray, counts: Counts
+    delta: np.ndarray,
+    X_WG: RigidTransform,
+    ik,
+    q_seed: np.ndarray,
+    counts: Counts,
+    down: bool = False,
 ) -> np.ndarray | None:
     """Joint targets putting the grasp frame at ``X_WG`` moved by ``delta`` (6 numbers), or
-    None when the IK cannot reach it (counted)."""
-    R = RollPitchYaw(delta[3:6]).ToRotationMatrix().multiply(X_WG.rotation())
+    None when the IK cannot reach it (counted). ``down``: the hand pointing straight down,
+    turned by its measured yaw plus ``delta``'s dyaw (droll and dpitch unused): a top-down
+    hand whose tilt cannot drift from step to step."""
+    if down:
+        R = X_WG.rotation().matrix()
+        yaw = float(np.arctan2(R[1, 0], R[0, 0])) + float(delta[5])
+        R = RotationMatrix.MakeZRotation(yaw).multiply(RotationMatrix.MakeXRotation(np.pi))
+    else:
+        R = RollPitchYaw(delta[3:6]).ToRotationMatrix().multiply(X_WG.rotation())
     target = RigidTransform(R, X_WG.translation() + delta[:3])
     q = ik.solve(target, q_seed)
     if q is None:

@@ -98,7 +98,7 @@ class PolicySource(LeafSystem):
         task: PolicyTask,
         stop_at_goal: bool = True,
         act_budget_s: float | None = ACT_BUDGET_S,
-        settle_s: float = 0.0,
+        smooth_s: float = 0.0,
     ) -> None:
         super().__init__()
         #: End the policy's run when the measured world shows the goal (as the Gym env's
@@ -134,8 +134,8 @@ class PolicySource(LeafSystem):
             name: self.DeclareAbstractInputPort(f"image_{name}", AbstractValue.Make(ImageRgba8U()))
             for name in cameras
         }
-        self._settle_s = settle_s
-        self._groups = declare_reference_ports(self, self._q, settle_s)
+        self._settle_s = smooth_s
+        self._groups = declare_reference_ports(self, self._q, smooth_s)
         self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate_hz, 0.0, self._update)
 
     # --- what the policy sees -------------------------------------------------------

@@ -30,12 +30,15 @@ is made through the plug-in door, so nothing here imports the learning code. Its
 - ``joint_position``: 8 numbers, the arm's seven joint targets and the gripper's width;
 - ``ee_delta``: 7 numbers, a move of the grasp frame from where it is measured (dx dy dz
   in m, droll dpitch dyaw in rad, world axes) and the gripper (0 closed, 1 open): the
-  hand's frame, as the VLAs answer. The joints come from damped least squares
-  (:class:`cake_drake.geometric.ik.DlsIk`, seeded at the last target), as under the
-  demonstrator that recorded such a skill; a move it cannot reach keeps the last target.
+  hand's frame, as the VLAs answer. Every grasp and place of these tasks is top-down, so
+  the hand is kept pointing down, turned by dyaw (droll and dpitch are not used: learned
+  tilts add up step after step, and nothing the skill reads measures them). The joints
+  come from damped least squares (:class:`cake_drake.geometric.ik.DlsIk`, seeded at the
+  last target), as under the demonstrator that recorded such a skill; a move it cannot
+  reach keeps the last target.
 
-With ``settle_s`` > 0, the joint targets reach the controller through a critically
-damped filter that settles on each in about ``settle_s``
+With ``smooth_s`` > 0, the joint targets reach the controller through a critically
+damped filter that settles on each in about ``smooth_s``
 (:func:`cake_drake.systems.waypoint_ik.declare_reference_ports`): the controller follows
 a motion, continuous in position and velocity, rather than a 10 Hz staircase.
 
@@ -141,7 +144,7 @@ class LearnedSkills(LeafSystem):
         meaning: Callable[[GroundAction], GroundAction],
         waypoints=None,
         ik=None,
-        settle_s: float = 0.0,
+        smooth_s: float = 0.0,
     ) -> None:
         super().__init__()
         self.skill, self.label, self.world = skill, label, world
@@ -159,7 +162,7 @@ class LearnedSkills(LeafSystem):
         #: Wall-clock budget (s) of one answer (a skill may carry its own, as a policy does).
         self._budget_s = getattr(skill, "act_budget_s", ACT_BUDGET_S)
         self.period_s = 1.0 / rate_hz
-        self.settle_s = settle_s
+        self.smooth_s = smooth_s
         self._action = self.DeclareAbstractInputPort(
             "action", AbstractValue.Make(ActionCommand(0, None))
         )
@@ -169,7 +172,7 @@ class LearnedSkills(LeafSystem):
         self._arm = self.DeclareVectorInputPort("arm_state", 14)
         self._hand = self.DeclareVectorInputPort("hand_state", 4)
         self._state = self.DeclareAbstractState(AbstractValue.Make(SkillProgress()))
-        self._groups = declare_reference_ports(self, q_start, self.settle_s)
+        self._groups = declare_reference_ports(self, q_start, self.smooth_s)
         self.DeclareAbstractOutputPort(
             "infeasible",
             lambda: AbstractValue.Make(Refusal()),
@@ -239,11 +242,11 @@ class LearnedSkills(LeafSystem):
             move = np.clip(answer, low, high)
             self.counts.clipped += int(not np.array_equal(move, answer))
             last = reference_target(self._groups, context)
-            q = spaces.ee_target(move[:6], X_WG, self.ik, last, self.counts)
+            q = spaces.ee_target(move[:6], X_WG, self.ik, last, self.counts, down=True)
             target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
         else:
             target, width = answer[:7], float(np.clip(answer[7], 0.0, GRIPPER_MAX))
-        hold_target(self._groups, context, state, target, self.settle_s)
+        hold_target(self._groups, context, state, target, self.smooth_s)
         fingers = np.array([width / 2, width / 2, 0.0, 0.0])
         state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
         self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))

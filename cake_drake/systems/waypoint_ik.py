@@ -37,18 +37,18 @@ SETTLE_RATE = 5.84
 
 
 def declare_reference_ports(
-    system: LeafSystem, q_start: np.ndarray, settle_s: float = 0.0
+    system: LeafSystem, q_start: np.ndarray, smooth_s: float = 0.0
 ) -> dict[str, int]:
     """Declare :data:`REFERENCE_PORTS` on ``system``, held at the start (``q_start`` at
     rest, fingers open, no action); the discrete state groups' indices by port name. For
     a system that writes the reference at its own rate (a policy, a learned skill) rather
     than ``WaypointIk``'s tape: it sets each new joint target with :func:`hold_target`.
 
-    ``settle_s`` 0: each target is held as a step (``desired_state`` a state output, zero
-    velocity): the controller is kicked at every step. ``settle_s`` > 0: the reference
+    ``smooth_s`` 0: each target is held as a step (``desired_state`` a state output, zero
+    velocity): the controller is kicked at every step. ``smooth_s`` > 0: the reference
     follows the targets through a critically damped second-order filter that settles on
-    a new target in ``settle_s`` (from rest, within 2 % of the move: its rate
-    :data:`SETTLE_RATE` / ``settle_s``): position and velocity
+    a new target in ``smooth_s`` (from rest, within 2 % of the move: its rate
+    :data:`SETTLE_RATE` / ``smooth_s``): position and velocity
     continuous, so computed torque follows a motion instead of a staircase. Between
     targets the filter is solved exactly; ``desired_state`` is computed from the group
     ``smooth`` (the target, the position and velocity when it was set, and that time)
@@ -64,42 +64,42 @@ def declare_reference_ports(
     groups = {}
     for name, size in REFERENCE_PORTS.items():
         assert initial[name].shape == (size,)
-        if settle_s > 0 and name == "desired_state":
+        if smooth_s > 0 and name == "desired_state":
             continue
         groups[name] = system.DeclareDiscreteState(initial[name])
         system.DeclareStateOutputPort(name, groups[name])
-    if settle_s > 0:
+    if smooth_s > 0:
         smooth = groups["smooth"] = system.DeclareDiscreteState(
             np.r_[q_start, q_start, np.zeros(7), 0.0]
         )
         needs = {system.time_ticket(), system.discrete_state_ticket(smooth)}
 
         def desired_state(context, out) -> None:
-            q, v = _smooth_at(context, smooth, settle_s)
+            q, v = _smooth_at(context, smooth, smooth_s)
             out.SetFromVector(np.r_[q, v])
 
         system.DeclareVectorOutputPort("desired_state", 14, desired_state, needs)
     return groups
 
 
-def _smooth_at(context, group: int, settle_s: float) -> tuple[np.ndarray, np.ndarray]:
+def _smooth_at(context, group: int, smooth_s: float) -> tuple[np.ndarray, np.ndarray]:
     """The filtered reference's position and velocity at the context's time: with the
     error e = q - target, e(t) = (e0 + (v0 + w e0) t) exp(-w t)."""
     r = context.get_discrete_state(group).value()
     target, q0, v0 = r[:7], r[7:14], r[14:21]
-    w, t = SETTLE_RATE / settle_s, max(context.get_time() - r[21], 0.0)
+    w, t = SETTLE_RATE / smooth_s, max(context.get_time() - r[21], 0.0)
     e0 = q0 - target
     b = v0 + w * e0
     decay = np.exp(-w * t)
     return target + (e0 + b * t) * decay, (v0 - w * b * t) * decay
 
 
-def hold_target(groups: dict[str, int], context, state, q: np.ndarray, settle_s: float = 0.0):
-    """Make ``q`` (7 joint targets) the reference from now on: held at once (``settle_s``
+def hold_target(groups: dict[str, int], context, state, q: np.ndarray, smooth_s: float = 0.0):
+    """Make ``q`` (7 joint targets) the reference from now on: held at once (``smooth_s``
     0) or approached smoothly from where the reference is now (see
     :func:`declare_reference_ports`)."""
     if "smooth" in groups:
-        here, velocity = _smooth_at(context, groups["smooth"], settle_s)
+        here, velocity = _smooth_at(context, groups["smooth"], smooth_s)
         row = np.r_[q, here, velocity, context.get_time()]
         state.get_mutable_discrete_state(groups["smooth"]).set_value(row)
     else:

@@ -38,9 +38,14 @@ class NumpyChunks:
     """The checkpoint in ``folder`` (a ``cake_mlp`` without cameras), acting: ``reset``,
     ``select_action`` and ``predict_action_chunk`` on NumPy arrays, batched (B, ...)."""
 
-    def __init__(self, folder: Path) -> None:
+    def __init__(self, folder: Path, ensemble: float = 0.0) -> None:
         from safetensors.numpy import load_file
 
+        #: ACT's temporal ensembling (Zhao et al. 2023), 0: off. Above 0, a chunk is
+        #: predicted at every step and each action is the weighted mean of every live
+        #: chunk's prediction for that step, as ACT weighs them: exp(-ensemble * i),
+        #: i = 0 the oldest chunk.
+        self.ensemble = float(ensemble)
         folder = Path(folder)
         data = json.loads((folder / "config.json").read_text())
         self.n_obs_steps = int(data.get("n_obs_steps", 1))
@@ -65,6 +70,9 @@ class NumpyChunks:
     def reset(self) -> None:
         self._queue: deque[np.ndarray] = deque([], maxlen=self.n_action_steps)
         self._seen: deque[dict[str, np.ndarray]] = deque([], maxlen=self.n_obs_steps)
+        #: Temporal ensembling: the chunks still covering a coming step, oldest first,
+        #: each with how many of its actions have passed.
+        self._chunks: deque[list] = deque([], maxlen=self.chunk_size)
 
     def predict_action_chunk(self, batch: dict[str, np.ndarray]) -> np.ndarray:
         """The chunk, (B, chunk_size, action_dim), for inputs (B, D) or (B, T, D)."""
@@ -94,6 +102,17 @@ class NumpyChunks:
         while len(self._seen) < self.n_obs_steps - 1:
             self._seen.append(now)
         self._seen.append(now)
+        if self.ensemble > 0:
+            frames = {k: np.stack([seen[k] for seen in self._seen], axis=1) for k in now}
+            self._chunks.append([self.predict_action_chunk(frames), 0])
+            rows = [chunk[:, used] for chunk, used in self._chunks]
+            weights = np.exp(-self.ensemble * np.arange(len(rows)))
+            action = np.tensordot(weights / weights.sum(), np.stack(rows), axes=1)
+            for entry in self._chunks:
+                entry[1] += 1
+            while self._chunks and self._chunks[0][1] >= self.chunk_size:
+                self._chunks.popleft()
+            return action.astype(np.float32)
         if not self._queue:
             frames = {k: np.stack([seen[k] for seen in self._seen], axis=1) for k in now}
             chunk = self.predict_action_chunk(frames)[:, : self.n_action_steps]
@@ -120,15 +139,18 @@ class TorchActing:
             return self.network.select_action(tensors).cpu().numpy()
 
 
-def load(folder: Path, device: str = "cpu"):
+def load(folder: Path, device: str = "cpu", ensemble: float = 0.0):
     """The ``cake_mlp`` checkpoint in ``folder``, acting on NumPy arrays: in NumPy when it
-    reads numbers only and acts on the CPU, else through torch."""
+    reads numbers only and acts on the CPU, else through torch (``ensemble``, temporal
+    ensembling: NumPy only)."""
     from cake_drake.learning.mlp.features import camera_shapes
 
     folder = Path(folder)
     inputs = json.loads((folder / "config.json").read_text())["input_features"]
     if device == "cpu" and not camera_shapes(inputs):
-        return NumpyChunks(folder)
+        return NumpyChunks(folder, ensemble)
+    if ensemble:
+        raise ValueError("temporal ensembling acts in NumPy: a cake_mlp without cameras, cpu")
     from cake_drake.learning.mlp.network import load as load_network
 
     return TorchActing(load_network(folder, device), device)
