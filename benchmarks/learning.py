@@ -65,7 +65,7 @@ stacks were set off the cube below (median/95th percentile) and the mean simulat
 
     python benchmarks/learning.py --skills 400 --tasks tower5 blocks3 --sizes 6 8
     python benchmarks/learning.py --skills 800 --skill-tasks skills skills_hand --tasks tower5
-    python benchmarks/learning.py --skills 800 --skill-tasks skills_hand+skills_hand_tall:300
+    python benchmarks/learning.py --skills 800 --skill-tasks skills+skills_tall:300
 """
 
 from __future__ import annotations
@@ -233,6 +233,10 @@ def mixed(parts: list[tuple[str, int]], work: Path) -> Path:
         return out
     sources = [demonstrations(task, n, work) for task, n in parts]
     reports = [json.loads((src / "report.json").read_text()) for src in sources]
+    spaces = {r["control_mode"] for r in reports}
+    if len(spaces) > 1:
+        sys.exit(f"{tag}: demonstrations of {' and '.join(sorted(spaces))} actions; one "
+                 "dataset holds one action space")
     files = [(src, seed) for src, r in zip(sources, reports, strict=True) for seed in r["seeds"]]
     rows = [json.loads((src / "episodes" / f"ep_{seed}.json").read_text()) for src, seed in files]
     episodes = (_load(src / "episodes" / f"ep_{seed}.npz", row, images=False)
@@ -509,7 +513,7 @@ def main() -> None:
         nargs="+",
         default=["skills"],
         help="--skills: the recording tasks trained (skills: joint targets; skills_hand: "
-        "moves of the hand; skills_hand+skills_hand_tall:300: with 300 tall-tower ones)",
+        "moves of the hand; skills+skills_tall:300: with 300 tall-tower ones)",
     )
     p.add_argument("--shipped", action="store_true", help="--skills: models/policies/skills too")
     p.add_argument(

@@ -9,7 +9,7 @@ the elbow's commanded torque jumps from one 10 ms sample to the next (median and
 percentile of |delta tau|, N m): the chatter a staircase reference causes. ``--figure``
 draws the elbow's torque of the first episode under each setting, one above the other.
 
-    python benchmarks/skill_reference.py --episodes 20 --settle 0 0.1 0.2 --figure docs/images/skill_reference.png
+    python benchmarks/skill_reference.py --episodes 20 --smooth 0 0.15 --figure docs/images/skill_reference.png
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--seed", type=int, default=100_000, help="the first held-out seed")
-    p.add_argument("--settle", type=float, nargs="+", default=[0.0, 0.2])
+    p.add_argument("--smooth", type=float, nargs="+", default=[0.0, 0.15])
     p.add_argument("--figure", type=Path, help="draw the elbow's torque to this PNG")
     args = p.parse_args()
     print(machine())
@@ -58,21 +58,21 @@ def main() -> None:
     print(f"  {'smooth_s':>8}  {'built':>7}  {'sim s':>6}  {'stacks mm (median/p95)':>22}  "
           f"{'|d tau| elbow N m (median/p99)':>30}")  # fmt: skip
     shown = {}
-    for settle in args.settle:
+    for smooth in args.smooth:
         built, sim, places, jumps = 0, [], [], []
         for k in range(args.episodes):
-            result = episode(args.seed + k, settle)
+            result = episode(args.seed + k, smooth)
             built += result.success
             sim.append(result.execution.sim_s)
             places += [p["offset_mm"] for p in result.execution.monitoring.get("places", [])]
             logs = result.execution.logs
             jumps.append(np.abs(np.diff(logs.tau_commanded[:, ELBOW])))
             if k == 0:
-                shown[settle] = (logs.t, logs.tau_commanded[:, ELBOW], logs.gravity[:, ELBOW])
+                shown[smooth] = (logs.t, logs.tau_commanded[:, ELBOW], logs.gravity[:, ELBOW])
         jump = np.concatenate(jumps)
         stacks = (f"{np.median(places):.1f} / {np.percentile(places, 95):.1f}"
                   if places else "-")  # fmt: skip
-        print(f"  {settle:>8g}  {built:>3}/{args.episodes:<3}  {np.mean(sim):>6.1f}  "
+        print(f"  {smooth:>8g}  {built:>3}/{args.episodes:<3}  {np.mean(sim):>6.1f}  "
               f"{stacks:>22}  {np.median(jump):>14.3f} / {np.percentile(jump, 99):.2f}",
               flush=True)  # fmt: skip
     if args.figure:
@@ -88,11 +88,11 @@ def draw(shown: dict, path: Path) -> None:
 
     fig, axes = plt.subplots(len(shown), 1, figsize=(10, 2.6 * len(shown)), sharex=True,
                              squeeze=False)  # fmt: skip
-    for ax, (settle, (t, tau, gravity)) in zip(axes[:, 0], shown.items(), strict=True):
+    for ax, (smooth, (t, tau, gravity)) in zip(axes[:, 0], shown.items(), strict=True):
         end = np.searchsorted(t, 12.0)
         ax.plot(t[:end], tau[:end], color="tab:green", lw=0.9, label="torque commanded")
         ax.plot(t[:end], gravity[:end], color="tab:blue", lw=0.9, label="g(q)")
-        what = "steps held 0.1 s" if settle == 0 else f"filter settling in {settle:g} s"
+        what = "steps held 0.1 s" if smooth == 0 else f"a filter settling in {smooth:g} s"
         ax.set_title(f"learned skills, joint 4 (elbow): the skill's targets as {what}",
                      fontsize=10)  # fmt: skip
         ax.set_ylabel("N m")
