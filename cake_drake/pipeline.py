@@ -327,7 +327,7 @@ def check_skills(motion) -> None:
     _range(motion.skill_smooth_s, 0.0, 5.0, "motion.skill_smooth_s", " s")
     _range(motion.skill_ensemble, 0.0, 10.0, "motion.skill_ensemble")
     _range(motion.skill_max_steps, 0, 1_000_000, "motion.skill_max_steps")
-    if motion.skill_ensemble > 0 and motion.skill_device != "cpu":
+    if motion.skill_ensemble > 0 and motion.skill_device not in ("cpu", "auto"):
         raise InputError(
             f"motion.skill_ensemble = {motion.skill_ensemble:g} with skill_device "
             f"{motion.skill_device}: the ensembled skill acts in NumPy on the CPU; set "
