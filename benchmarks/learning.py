@@ -131,12 +131,20 @@ def cake(command: str, *args: str, peak: dict | None = None) -> float:
     return time.perf_counter() - t0
 
 
+def is_skill_checkpoint(policy: str) -> bool:
+    """Whether ``policy`` is a training folder of a learned skill."""
+    from cake_drake.learning.checkpoint import _config, is_skill, model_folder
+
+    return Path(policy).is_dir() and is_skill(_config(model_folder(Path(policy))))
+
+
 def evaluate(task: str, policy: str, out: Path, episodes: int, seed: int) -> dict:
     """``evaluate``'s summary (run if absent), with its whole process's wall time."""
     summary, wall = out / "summary.json", out.parent / f"{out.name}_wall_s.json"
     if not summary.is_file():
         args = ["--suite", str(LEARNING), "--name", task, "--episodes", str(episodes)]
-        args += ["--frames", "8"]  # failures.png: how the first failures end
+        if not is_skill_checkpoint(policy):  # a skill's episodes are whole runs: no frames
+            args += ["--frames", "8"]  # failures.png: how the first failures end
         seconds = cake("evaluate", policy, *args, "--seed", str(seed), "--out", str(out))
         wall.write_text(json.dumps(seconds))
     made = json.loads(summary.read_text())
