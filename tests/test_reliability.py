@@ -75,11 +75,11 @@ class _HangingSkill:
         return np.zeros(8)
 
 
-def hanging_skill(path, device):
+def hanging_skill(path, device, ensemble=0.0):
     return _HangingSkill()
 
 
-def _no_check(path, device):
+def _no_check(path, device, action_space=""):
     return None
 
 
@@ -103,7 +103,8 @@ def test_the_lerobot_env_offers_only_learning_tasks():
     with pytest.raises(ValueError) as e:
         CakeDrakeEnv(task="learned_tower5")
     offered = str(e.value).split("choose one of: ")[1].split(", ")
-    assert offered == ["stack2", "tower3", "tower5", "blocks3", "skills"]
+    assert offered == ["stack2", "tower3", "tower5", "blocks3", "skills", "skills_hand",
+                       "skills_hand_tall", "skills_tall", "towers8"]  # fmt: skip
     assert CakeDrakeEnv(task="tower3").task == "tower3"
 
 
