@@ -243,8 +243,10 @@ def mixed(parts: list[tuple[str, int]], work: Path) -> Path:
     reports = [json.loads((src / "report.json").read_text()) for src in sources]
     spaces = {r["control_mode"] for r in reports}
     if len(spaces) > 1:
-        sys.exit(f"{tag}: demonstrations of {' and '.join(sorted(spaces))} actions; one "
-                 "dataset holds one action space")
+        sys.exit(
+            f"{tag}: demonstrations of {' and '.join(sorted(spaces))} actions; one "
+            "dataset holds one action space"
+        )
     files = [(src, seed) for src, r in zip(sources, reports, strict=True) for seed in r["seeds"]]
     rows = [json.loads((src / "episodes" / f"ep_{seed}.json").read_text()) for src, seed in files]
     episodes = (_load(src / "episodes" / f"ep_{seed}.npz", row, images=False)
@@ -255,9 +257,15 @@ def mixed(parts: list[tuple[str, int]], work: Path) -> Path:
     for src, seed in files:
         for name in (f"ep_{seed}.npz", f"ep_{seed}.json"):
             os.link(src / "episodes" / name, out / "episodes" / name)
-    report = {**first, "episodes": len(rows), "frames": written, "seeds": [s for _, s in files],
-              "failed": [f for r in reports for f in r.get("failed", [])],
-              "tried": sum(r["tried"] for r in reports), "parts": [list(p) for p in parts]}  # fmt: skip
+    report = {
+        **first,
+        "episodes": len(rows),
+        "frames": written,
+        "seeds": [s for _, s in files],
+        "failed": [f for r in reports for f in r.get("failed", [])],
+        "tried": sum(r["tried"] for r in reports),
+        "parts": [list(p) for p in parts],
+    }
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     return out
 

@@ -9,7 +9,8 @@ the elbow's commanded torque jumps from one 10 ms sample to the next (median and
 percentile of |delta tau|, N m): the chatter a staircase reference causes. ``--figure``
 draws the elbow's torque of the first episode under each setting, one above the other.
 
-    python benchmarks/skill_reference.py --episodes 20 --smooth 0 0.15 --figure docs/images/skill_reference.png
+    python benchmarks/skill_reference.py --episodes 10 --smooth 0 0.15 \
+        --figure docs/images/skill_reference.png
 """
 
 from __future__ import annotations

@@ -182,7 +182,9 @@ wrong:
         assert len(line.splitlines()) == 1
         assert f"a skill trained on {trained} actions" in line and f"give {trained}" in line
         assert not out.exists()
-    spec = scenario_file(tmp_path, f'wrong:\n  motion: {{skills: "{skill}", skill_action_space: joints}}\n')
+    spec = scenario_file(
+        tmp_path, f'wrong:\n  motion: {{skills: "{skill}", skill_action_space: joints}}\n'
+    )
     r = cli("cake_drake.run", "--scenario", str(spec), "--name", "wrong", "--out",
             str(tmp_path / "x"))  # fmt: skip
     assert r.returncode == 2 and "one of joint_position, ee_delta" in r.stderr, r.stderr
@@ -236,7 +238,7 @@ def test_dagger_for_skills_with_a_teacher_that_cannot_label_per_action_is_refuse
 
 def test_skill_settings_that_cannot_work_are_refused_before_simulating(tmp_path):
     for motion, words in (
-        ("skill_ensemble: 0.01, skill_device: cuda", "the ensembled skill acts in NumPy on the CPU"),
+        ("skill_ensemble: 0.01, skill_device: cuda", "the ensembled skill acts in NumPy"),
         ("skill_ensemble: -1", "motion.skill_ensemble = -1.0 is outside 0 to 10"),
         ("skill_smooth_s: 9", "motion.skill_smooth_s = 9.0 is outside 0 to 5 s"),
     ):  # fmt: skip

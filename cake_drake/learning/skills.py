@@ -169,7 +169,6 @@ class SkillsUnderExpert:
 
     def __init__(self, path: str, device: str = "cpu") -> None:
         from cake_drake.learning.expert import ClosedLoopExpert
-
         from cake_drake.scenario import Motion
 
         # Acting as it does under the planner, its chunks ensembled as a run's are.

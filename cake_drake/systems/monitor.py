@@ -251,7 +251,9 @@ class ExecutionMonitor(LeafSystem):
         if ("on", cube, support) not in self._roles.to_canonical(facts):
             return None
         poses = self._poses_port.Eval(context)
-        offset = poses[self._bodies[cube]].translation() - poses[self._bodies[support]].translation()
+        offset = (
+            poses[self._bodies[cube]].translation() - poses[self._bodies[support]].translation()
+        )
         return str(action), float(np.linalg.norm(offset[:2]))
 
     def _loose(self, context) -> tuple[str, str, float] | None:

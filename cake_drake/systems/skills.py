@@ -230,8 +230,11 @@ class LearnedSkills(LeafSystem):
         except (TypeError, ValueError):  # not numbers at all
             answer, shown = np.empty(0), repr(raw)
         if answer.shape != (size,) or not np.all(np.isfinite(answer)):
-            what = ("7 joint targets, the gripper's width" if size == 8
-                    else "a move of the hand, dx dy dz droll dpitch dyaw, and the gripper")  # fmt: skip
+            what = (
+                "7 joint targets, the gripper's width"
+                if size == 8
+                else "a move of the hand, dx dy dz droll dpitch dyaw, and the gripper"
+            )
             raise ExecutionError(
                 f"skill {self.label!r} answered {shown[:60]} "
                 f"for {prog.action} (action {prog.working + 1}); a {self.space} skill "
