@@ -1071,16 +1071,16 @@ def _places_text(summary: dict) -> str:
 
 def _is_skill(path: Path) -> bool:
     """Whether the checkpoint at ``path`` is a learned skill's (its config says so)."""
-    from cake_drake.learning.checkpoint import _config, is_skill, model_folder
+    from cake_drake.learning.checkpoint import is_skill_folder
 
-    return is_skill(_config(model_folder(path)))
+    return is_skill_folder(path)
 
 
 def _checkpoint_cameras(path: Path) -> dict:
     """The cameras the checkpoint at ``path`` sees (its config's input features)."""
-    from cake_drake.learning.checkpoint import _config, camera_features, model_folder
+    from cake_drake.learning.checkpoint import sees
 
-    return camera_features(_config(model_folder(path)))
+    return sees(path)
 
 
 TRAIN_DOC = """Train a policy on a recording with LeRobot's own training loop, offline.
@@ -1130,10 +1130,22 @@ network learns to put its choice on them (--steps, default 3000; --batch-size, d
 64; --seed). OUT gets planner.json and weights.npz: plan with it as --planner learned@OUT
 (python -m cake_drake.plan, run, a scenario's task.planner).
 
+--rl SUITE --name TASK learns TASK of the scenario file SUITE from a reward instead, from
+no dataset: Stable-Baselines3's PPO (or SAC) on CakeDrake/Stack-v0 with the task's
+episodes, with the task's training.rl recipe (algorithm, steps, environments side by side,
+the reward's weights; models/scenarios/learning.yaml). With a base (the recipe's, or
+--base DIR: a policy learned by imitation) the learner is a bounded residual on the
+frozen base; without one it learns from scratch. --steps, --envs and --algorithm
+override the recipe. Prints, every rollout, the environment steps, steps/s, the episodes'
+return and success. OUT gets model.zip, rl.json, progress.csv and curve.png; evaluate it
+with python -m cake_drake.evaluate OUT, or run it with reference: !Policy {checkpoint: OUT}.
+
 Exit codes: 0 trained; 2 bad input (a dataset lacking what the policy needs, a device
 that is not here, --dagger below 1, --beta outside 0 to 1, --dagger on a dataset with no
-task to roll a policy out on or no kept episodes, DAgger's flags without --dagger); 4 the
-checkpoint could not be written; 130 interrupted.
+task to roll a policy out on or no kept episodes, DAgger's flags without --dagger, an RL
+budget of no steps or less than one rollout, a reward term that does not exist or a weight
+that is no number, a base that is no policy of the task's action space); 4 the checkpoint
+could not be written; 130 interrupted.
 """
 
 
@@ -1161,6 +1173,16 @@ def train_parser() -> argparse.ArgumentParser:
         "--blocks", type=int, nargs=2, metavar=("MIN", "MAX"),
         help="--planner: the problems' sizes (default 3 6)",
     )  # fmt: skip
+    p.add_argument(
+        "--rl",
+        type=Path,
+        metavar="SUITE",
+        help="learn a task of this scenario file from a reward (with --name)",
+    )
+    p.add_argument("--name", help="--rl: the task (a scenario's name in SUITE)")
+    p.add_argument("--base", help="--rl: a frozen policy's checkpoint the learner corrects")
+    p.add_argument("--algorithm", help="--rl: ppo | sac (default: the recipe's)")
+    p.add_argument("--envs", type=int, help="--rl: environments side by side (default: recipe's)")
     p.add_argument("--policy", help="mlp | act | diffusion (default: the recipe's)")
     p.add_argument("--inputs", help="state | images | both | skill (default: the recipe's)")
     p.add_argument(
@@ -1190,6 +1212,13 @@ def main_train(argv: list[str] | None = None) -> int:
     from cake_drake.learning.train import for_inputs, for_policy, recipe_of, train
 
     args = train_parser().parse_args(argv)
+    rl_only = {"--name": args.name, "--base": args.base, "--algorithm": args.algorithm,
+               "--envs": args.envs}  # fmt: skip
+    if args.rl is not None:
+        return _main_rl(args)
+    for flag, value in rl_only.items():
+        if value is not None:
+            raise InputError(f"{flag} without --rl: it is one of RL's settings")
     if args.planner:
         return _main_planner(args)
     if args.blocks is not None:
@@ -1246,6 +1275,44 @@ def _main_residual(args: argparse.Namespace) -> int:
                              "setting; a residual is fitted by least squares")  # fmt: skip
     train_residual(args.dataset, args.out)
     print(describe(args.out))
+    return EXIT_OK
+
+
+def _main_rl(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from cake_drake.learning.rl import FILES, KIND_LABELS, check_recipe, train_rl
+    from cake_drake.outputs.files import OutputDir
+    from cake_drake.scenario import load_scenario
+
+    if args.dataset:
+        raise InputError(f"{args.dataset[0]}: --rl reads no dataset (it learns from the "
+                         "reward of its own episodes)")  # fmt: skip
+    others = ("residual", "planner", "policy", "inputs", "cameras", "weights", "dagger",
+              "resume", "batch_size", "blocks")  # fmt: skip
+    for name in others:
+        if getattr(args, name) not in (None, False):
+            raise InputError(f"--{name.replace('_', '-')} with --rl: it is not one of RL's "
+                             "settings (the task's training.rl recipe has them)")  # fmt: skip
+    if args.device not in ("auto", "cpu"):
+        raise InputError(f"--device {args.device} with --rl: it trains on the CPU")
+    if not args.name:
+        raise InputError(f"--rl {args.rl} without --name: name the task to learn")
+    scenario = load_scenario(args.rl, args.name)
+    recipe = scenario.training.rl
+    given = {"steps": args.steps, "base": args.base, "algorithm": args.algorithm,
+             "envs": args.envs}  # fmt: skip
+    recipe = check_recipe(replace(recipe, **{k: v for k, v in given.items() if v is not None}))
+    with OutputDir(args.out, "train --rl", FILES, [args.rl]) as staged:
+        info = train_rl(scenario, args.name, staged, recipe, args.seed,
+                        log=lambda line: print(line, flush=True))  # fmt: skip
+        staged.commit()
+    won, of = info["last_episodes_success"]
+    print(
+        f"{args.out}: {KIND_LABELS[info['kind']]} ({info['algorithm'].upper()}) on "
+        f"{args.name}, {info['steps']} steps in {info['minutes']:.1f} min "
+        f"({info['steps_per_s']:.0f} steps/s); the last {of} episodes: {won} succeeded"
+    )
     return EXIT_OK
 
 

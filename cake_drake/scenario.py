@@ -210,6 +210,65 @@ class PolicyRecipe:
 
 
 @dataclass
+class Reward:
+    """What a step of reinforcement learning is worth: a weight per term, each term a
+    number from 0 to 1 read from the measured world at every step
+    (:mod:`cake_drake.learning.rewards` defines them). Unset, ``goal`` weighs 1 and the
+    others 0: the Gym env's own reward."""
+
+    #: The fraction of the goal's facts measured true (the Gym env's own reward).
+    goal: float = 1.0
+    #: 1 at the step the goal is reached (every fact, every stack within 5 mm).
+    success: float = 0.0
+    #: The hand's nearness to the first cube the goal still wants moved (1 at its centre,
+    #: 0 from 20 cm).
+    reach: float = 0.0
+    #: How far the cubes the goal still wants moved are raised (1 from one cube's height).
+    lift: float = 0.0
+    #: Each goal-stacked cube's horizontal alignment over the one it goes on, while above
+    #: it (1 centred, 0 from 10 mm): precision, the last millimetres.
+    place: float = 0.0
+    #: 1 every step: a negative weight is the cost of time, so that ending an episode by
+    #: success is worth more than lingering near it.
+    step: float = 0.0
+    #: 1 at the step a cube leaves the table (the episode ends there): a negative weight
+    #: keeps the cost of time from paying for throwing a cube away.
+    lost: float = 0.0
+
+
+@dataclass
+class RlRecipe:
+    """How a task is learned from a reward (``python -m cake_drake.train --rl``): a
+    Stable-Baselines3 algorithm on ``CakeDrake/Stack-v0`` with the task's episodes, from
+    scratch, or as a bounded residual on a frozen policy (``base``)."""
+
+    algorithm: str = "ppo"  # ppo | sac
+    #: Environment steps in all (every environment's together).
+    steps: int = 100_000
+    #: Environments stepped side by side (Gymnasium's make_vec; 1: in this process).
+    envs: int = 2
+    #: A frozen policy's checkpoint the learner corrects (a residual); empty: from scratch.
+    base: str = ""
+    #: The residual's bound: at most this much added to each joint target (rad).
+    residual_scale: float = 0.05
+    #: ... and to the gripper's command (0: the base's own).
+    residual_gripper: float = 0.0
+    #: PPO: steps each environment takes between updates, the updates' batch and passes.
+    rollout: int = 512
+    batch_size: int = 128
+    epochs: int = 5
+    lr: float = 3.0e-4
+    gamma: float = 0.99
+    #: The policy's (and value's) hidden layers.
+    hidden_dims: list[int] = field(default_factory=lambda: [256, 256])
+    #: The initial exploration noise (PPO's log-std): small for a residual.
+    log_std: float = -1.0
+    #: An episode's step budget (0: the task's ``reference.max_steps``).
+    max_steps: int = 0
+    reward: Reward = field(default_factory=Reward)
+
+
+@dataclass
 class Training:
     """A learning task's recipe for ``python -m cake_drake.train``: LeRobot's policy, what it
     reads, how long it trains and how big its network is (data, not code)."""
@@ -240,6 +299,8 @@ class Training:
     #: The recipe's changes when ACT or Diffusion Policy trains instead (train --policy).
     act: PolicyRecipe = field(default_factory=PolicyRecipe)
     diffusion: PolicyRecipe = field(default_factory=PolicyRecipe)
+    #: How the task is learned from a reward instead (train --rl).
+    rl: RlRecipe = field(default_factory=RlRecipe)
 
 
 ReferenceConfig = Planned | Recorded | Policy
@@ -310,6 +371,7 @@ class Scenario:
 #: imports them): a whole-task policy's checkpoint, a learned skill's; and their checks.
 CHECKPOINT_POLICY = "cake_drake.learning.checkpoint:make"
 CHECKPOINT_CHECK = "cake_drake.learning.checkpoint:check_folder"
+CHECKPOINT_DESCRIBE = "cake_drake.learning.checkpoint:describe"
 SKILL_POLICY = "cake_drake.learning.skills:make"
 SKILL_CHECK = "cake_drake.learning.skills:check_folder"
 
@@ -667,6 +729,8 @@ __all__ = [
     "Planned",
     "Policy",
     "Recorded",
+    "Reward",
+    "RlRecipe",
     "Scenario",
     "Simulation",
     "Task",

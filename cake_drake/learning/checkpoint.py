@@ -224,8 +224,14 @@ def check_folder(path: Path, action_space: str, device: str = "auto", cameras=No
     """Refuse, before anything is built, a folder that is no checkpoint, one whose action
     does not fit ``action_space``, one that sees cameras the run lacks (``cameras``: the
     run's, when given), or a device that is not here, or a Python or LeRobot that cannot
-    load it; the model's folder."""
+    load it; the model's folder. An RL training's folder is checked by
+    :func:`cake_drake.learning.rl.check_folder`."""
+    from cake_drake.learning import rl
     from cake_drake.learning.dataset import require_lerobot
+
+    if rl.is_rl(path):
+        rl.check_folder(path, action_space, device, cameras)
+        return Path(path)
 
     require_lerobot()
     folder = model_folder(path)
@@ -350,6 +356,36 @@ class CheckpointPolicy:
         return action.squeeze(0).cpu().numpy().astype(np.float64)
 
 
-def make(path: str, device: str = "auto") -> CheckpointPolicy:
-    """A checkpoint folder as a policy plug-in (``evaluate DIR``, ``!Policy {checkpoint}``)."""
+def make(path: str, device: str = "auto"):
+    """A checkpoint folder as a policy plug-in (``evaluate DIR``, ``!Policy {checkpoint}``):
+    a LeRobot checkpoint, or an RL training's folder (:class:`cake_drake.learning.rl.RlPolicy`)."""
+    from cake_drake.learning import rl
+
+    if rl.is_rl(path):
+        return rl.RlPolicy(path, device)
     return CheckpointPolicy(path, device)
+
+
+def sees(path: Path) -> dict[str, tuple[int, ...]]:
+    """The cameras the checkpoint at ``path`` reads (an RL residual: its base's)."""
+    from cake_drake.learning import rl
+
+    if rl.is_rl(path):
+        return rl.base_cameras(path)
+    return camera_features(_config(model_folder(path)))
+
+
+def is_skill_folder(path: Path) -> bool:
+    """Whether the checkpoint at ``path`` is a learned skill's (its config says so)."""
+    from cake_drake.learning import rl
+
+    return not rl.is_rl(path) and is_skill(_config(model_folder(path)))
+
+
+def describe(path: Path) -> str:
+    """What learned the whole-task policy at ``path``, as a run's ``layers`` says it."""
+    from cake_drake.learning import rl
+
+    if rl.is_rl(path):
+        return rl.describe(path)
+    return f"imitation, {_config(model_folder(path)).get('type')}"

@@ -22,7 +22,9 @@ simulated seconds) and returns what the policy slot observes.
   scenario gets, with the same field names.
 - a generated problem whose goal already holds is drawn again (the same seed always
   gives the same problem).
-- reward: the fraction of the goal's facts measured true in the world; ``info`` has
+- reward: the fraction of the goal's facts measured true in the world, or the terms of
+  :mod:`cake_drake.learning.rewards` weighed by ``reward`` (a mapping, term -> weight:
+  ``{"goal": 1.0, "place": 0.5}``; ``info["reward_terms"]`` has every term); ``info`` has
   ``is_success`` (every goal fact true, every stacked cube within 5 mm of the one below),
   the English instruction ``task``, the ``goal`` facts and those ``missing`` (not
   measured true now).
@@ -49,6 +51,7 @@ from gymnasium import spaces as gs
 from pydrake.systems.analysis import Simulator
 
 from cake_drake.errors import InputError
+from cake_drake.learning import rewards
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, MAX_CUBES
 from cake_drake.world.cameras import Camera, default_cameras
@@ -134,9 +137,12 @@ class StackEnv(gymnasium.Env):
         render_mode: str | None = None,
         placement: tuple[float, float] = (0.0, 0.0),
         tall: bool = False,
+        reward: Mapping | None = None,
     ) -> None:
         from cake_drake.geometric.ik import Kinematics
+        from cake_drake.learning.rewards import check_reward
         from cake_drake.pipeline import check
+        from cake_drake.scenario import Reward
 
         if obs_mode not in OBS_MODES:
             raise InputError(f"obs_mode {obs_mode!r}; choose one of: {', '.join(OBS_MODES)}")
@@ -159,6 +165,9 @@ class StackEnv(gymnasium.Env):
         if not isinstance(tall, bool):
             raise InputError(f"tall = {tall!r:.40}: true or false")
         self.tall = tall
+        #: The reward's weights (cake_drake.learning.rewards): the goal's fraction alone
+        #: unless given.
+        self.reward = check_reward(Reward() if reward is None else reward, "reward")
         self.render_mode = render_mode
         # The same check a scenario gets, before make() returns: field names as a scenario's.
         self._checked_template = check(self._scenario(0, self.blocks[0]), write=False)
@@ -267,6 +276,7 @@ class StackEnv(gymnasium.Env):
         self._source_context = self._source.GetMyContextFromRoot(self._context)
         self._steps = 0
         self._period_index = 0
+        self._start_z = None  # the cubes' heights as the episode begins (the lift term)
         #: This episode's step budget: ``max_steps``, or (0) scaled to the classical plan.
         self.budget = spaces.step_budget(
             self.max_steps, len(plan.actions), self.rate_hz, self._periods
@@ -319,8 +329,16 @@ class StackEnv(gymnasium.Env):
         if "rgb" in self.obs_mode:
             obs["images"] = {c.name: o[f"observation.images.{c.name}"] for c in self.cameras}
         progress = self._source.progress(o)  # the slot's reading: once per observation
+        positions = np.asarray(o["observation.cubes"], np.float64)[:, :3]
+        if self._start_z is None:
+            self._start_z = positions[:, 2].copy()
+        values = rewards.terms(
+            progress, self._goal, list(o["cubes"]), positions,
+            np.asarray(o["observation.ee_pose"][:3], np.float64), self._start_z,
+        )  # fmt: skip
         info = {
-            "reward": progress.reward(self._goal),
+            "reward": rewards.weighted(self.reward, values),
+            "reward_terms": values,
             "is_success": progress.reached,
             "unrecoverable": progress.lost,
             "task": o["task"],

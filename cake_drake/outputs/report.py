@@ -47,13 +47,19 @@ def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str
 def layers(scenario, plan) -> dict:
     """Each layer of the cake, classical (which one) or learned (which checkpoint): the
     label the chapter asks a student to put on every layer of a system."""
-    from cake_drake.scenario import Policy, Recorded
+    from cake_drake.plugins import load_attribute
+    from cake_drake.scenario import CHECKPOINT_DESCRIBE, Policy, Recorded, resolve_path
     from cake_drake.symbolic.learned import is_learned
 
     reference, motion = scenario.reference, scenario.motion
     if isinstance(reference, Policy):
         what = reference.checkpoint or reference.factory
-        symbolic = geometric = {"kind": "learned", "what": f"whole-task policy ({what})"}
+        how = ""
+        if reference.checkpoint:  # what learned it, said by the learned layer's adapter
+            describe = load_attribute(CHECKPOINT_DESCRIBE, "policy")
+            how = f", {describe(resolve_path(reference.checkpoint))}"
+        policy = {"kind": "learned", "what": f"whole-task policy{how} ({what})"}
+        symbolic = geometric = policy
     else:
         planner = getattr(plan, "planner", None)
         if isinstance(planner, str) and is_learned(planner):
