@@ -1281,9 +1281,11 @@ def _main_residual(args: argparse.Namespace) -> int:
 def _main_rl(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from cake_drake.learning.rl import FILES, KIND_LABELS, check_recipe, train_rl
+    from cake_drake.learning.checkpoint import require_rl
     from cake_drake.outputs.files import OutputDir
     from cake_drake.scenario import load_scenario
+
+    rl = require_rl("train --rl")
 
     if args.dataset:
         raise InputError(f"{args.dataset[0]}: --rl reads no dataset (it learns from the "
@@ -1302,14 +1304,14 @@ def _main_rl(args: argparse.Namespace) -> int:
     recipe = scenario.training.rl
     given = {"steps": args.steps, "base": args.base, "algorithm": args.algorithm,
              "envs": args.envs}  # fmt: skip
-    recipe = check_recipe(replace(recipe, **{k: v for k, v in given.items() if v is not None}))
-    with OutputDir(args.out, "train --rl", FILES, [args.rl]) as staged:
-        info = train_rl(scenario, args.name, staged, recipe, args.seed,
-                        log=lambda line: print(line, flush=True))  # fmt: skip
+    recipe = rl.check_recipe(replace(recipe, **{k: v for k, v in given.items() if v is not None}))
+    with OutputDir(args.out, "train --rl", rl.FILES, [args.rl]) as staged:
+        info = rl.train_rl(scenario, args.name, staged, recipe, args.seed,
+                           log=lambda line: print(line, flush=True))  # fmt: skip
         staged.commit()
     won, of = info["last_episodes_success"]
     print(
-        f"{args.out}: {KIND_LABELS[info['kind']]} ({info['algorithm'].upper()}) on "
+        f"{args.out}: {rl.KIND_LABELS[info['kind']]} ({info['algorithm'].upper()}) on "
         f"{args.name}, {info['steps']} steps in {info['minutes']:.1f} min "
         f"({info['steps_per_s']:.0f} steps/s); the last {of} episodes: {won} succeeded"
     )

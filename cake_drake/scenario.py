@@ -221,7 +221,7 @@ class Reward:
     #: 1 at the step the goal is reached (every fact, every stack within 5 mm).
     success: float = 0.0
     #: The hand's nearness to the first cube the goal still wants moved (1 at its centre,
-    #: 0 from 20 cm).
+    #: 1 - tanh(d / 20 cm) away from it).
     reach: float = 0.0
     #: How far the cubes the goal still wants moved are raised (1 from one cube's height).
     lift: float = 0.0

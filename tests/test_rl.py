@@ -84,7 +84,9 @@ def test_the_place_term_pays_for_the_last_millimetres():
 def test_reach_and_lift_lead_to_the_cube_the_goal_moves():
     apart = {"a": (0.5, 0.2, H), "b": (0.5, 0.0, H)}
     far, near = terms(apart, hand=(0.5, 0.2, 0.5)), terms(apart, hand=(0.5, 0.2, H + 0.05))
-    assert far["reach"] == 0.0 and near["reach"] == pytest.approx(0.75)
+    # 1 - tanh(d / 0.2): 0.5 m off earns little, 5 cm off most
+    assert far["reach"] == pytest.approx(1 - np.tanh(2.5 - H / 0.2), abs=1e-9)
+    assert near["reach"] == pytest.approx(1 - np.tanh(0.25)) and far["reach"] < 0.02
     lifted = terms({"a": (0.5, 0.2, H + 0.02), "b": (0.5, 0.0, H)}, start_z=(H, H))
     assert lifted["lift"] == pytest.approx(0.5) and lifted["goal"] == 0.5
     fallen = terms({"a": (0.5, 0.2, -0.3), "b": (0.5, 0.0, H)})
@@ -203,6 +205,22 @@ def test_rl_flags_without_rl_and_rl_with_a_dataset_are_refused(tmp_path):
     r = cake("train", "--rl", str(LEARNING), "--name", "learned_tower5", "--out",
              str(tmp_path / "o"))  # fmt: skip
     one_line(r, 2, "learned_tower5: RL trains a task whose reference is a !Policy")
+
+
+def test_without_stable_baselines3_rl_is_refused_with_the_line_that_installs_it(tmp_path):
+    shadow = tmp_path / "shadow" / "stable_baselines3"
+    shadow.mkdir(parents=True)
+    (shadow / "__init__.py").write_text(
+        "raise ModuleNotFoundError(\"No module named 'stable_baselines3'\", "
+        "name='stable_baselines3')\n"
+    )
+    env = {**os.environ, "PYTHONPATH": f"{shadow.parent}{os.pathsep}{ROOT}"}
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.train", "--rl", str(LEARNING), "--name", "stack2",
+         "--out", str(tmp_path / "o")],
+        cwd=ROOT, capture_output=True, text=True, timeout=300, env=env,
+    )  # fmt: skip
+    one_line(r, 2, "train --rl needs stable_baselines3, which is not installed: pip install")
 
 
 # --- a few hundred steps, and the folder acting everywhere ----------------------------------
@@ -410,3 +428,30 @@ def test_a_damaged_rl_folder_is_one_line_before_any_episode(trained, tmp_path, d
     damage(copy)
     one_line(evaluate(copy, tmp_path), 2, words)
     assert not (tmp_path / "ev").exists()
+
+
+# --- the residual that ships --------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_the_shipped_residual_names_its_base_and_stacks_where_its_base_does_not(tmp_path):
+    """models/policies/stack2_pixels_rl: the pixel policy's residual, checked against its
+    base's weights; on its scenario's seed it stacks and the base alone does not."""
+    from cake_drake.learning.checkpoint import model_folder
+    from cake_drake.learning.rl import digest, read_rl
+
+    shipped = ROOT / "models" / "policies" / "stack2_pixels_rl"
+    info = read_rl(shipped)
+    assert info["kind"] == "residual" and info["residual_scale"] == 0.02
+    assert info["base"]["path"] == "package://cake_drake/policies/stack2_pixels"
+    base = model_folder(ROOT / "models" / "policies" / "stack2_pixels")
+    assert info["base"]["sha256"] == digest(base)
+    assert sum(f.stat().st_size for f in shipped.iterdir()) < 5_000_000
+    r = cake("run", "--scenario", str(LEARNING), "--name", "learned_stack2_pixels_rl",
+             "--no-render", "--out", str(tmp_path / "rl"))  # fmt: skip
+    assert r.returncode == 0 and "goal reached: a on b" in r.stdout + r.stderr, r.stderr
+    layers = json.loads((tmp_path / "rl" / "summary.json").read_text())["layers"]
+    assert "imitation + RL residual, PPO" in layers["geometric"]["what"]
+    r = cake("run", "--scenario", str(LEARNING), "--name", "learned_stack2_pixels",
+             "--seed", "100003", "--no-render", "--out", str(tmp_path / "base"))  # fmt: skip
+    assert r.returncode == 3 and "goal facts not true" in r.stderr, r.stderr

@@ -151,6 +151,28 @@ def read_checkpoint(folder: Path) -> dict:
     return config
 
 
+def _rl(path):
+    """:mod:`cake_drake.learning.rl` when ``path`` is an RL training's folder (it holds
+    ``rl.json``, ``rl.FILE``), else None: imported only then (it needs Gymnasium and
+    Stable-Baselines3)."""
+    if not (Path(path) / "rl.json").is_file():
+        return None
+    return require_rl(f"{path}: an RL folder")
+
+
+def require_rl(what: str):
+    """:mod:`cake_drake.learning.rl`, refused in one line (with the line that installs
+    them) where Stable-Baselines3 or Gymnasium is not installed; ``what`` needs them."""
+    try:
+        import stable_baselines3  # noqa: F401 - only whether it is there
+
+        from cake_drake.learning import rl
+    except ModuleNotFoundError as e:
+        raise InputError(f"{what} needs {e.name}, which is not installed: "
+                         "pip install -e '.[rl]'") from None  # fmt: skip
+    return rl
+
+
 def is_skill(config: dict) -> bool:
     """Whether a checkpoint's config is a learned skill's (it reads ``observation.skill``:
     the ground action it executes) rather than a whole-task policy's."""
@@ -226,10 +248,10 @@ def check_folder(path: Path, action_space: str, device: str = "auto", cameras=No
     run's, when given), or a device that is not here, or a Python or LeRobot that cannot
     load it; the model's folder. An RL training's folder is checked by
     :func:`cake_drake.learning.rl.check_folder`."""
-    from cake_drake.learning import rl
     from cake_drake.learning.dataset import require_lerobot
 
-    if rl.is_rl(path):
+    rl = _rl(path)
+    if rl is not None:
         rl.check_folder(path, action_space, device, cameras)
         return Path(path)
 
@@ -359,33 +381,26 @@ class CheckpointPolicy:
 def make(path: str, device: str = "auto"):
     """A checkpoint folder as a policy plug-in (``evaluate DIR``, ``!Policy {checkpoint}``):
     a LeRobot checkpoint, or an RL training's folder (:class:`cake_drake.learning.rl.RlPolicy`)."""
-    from cake_drake.learning import rl
-
-    if rl.is_rl(path):
-        return rl.RlPolicy(path, device)
-    return CheckpointPolicy(path, device)
+    rl = _rl(path)
+    return CheckpointPolicy(path, device) if rl is None else rl.RlPolicy(path, device)
 
 
 def sees(path: Path) -> dict[str, tuple[int, ...]]:
     """The cameras the checkpoint at ``path`` reads (an RL residual: its base's)."""
-    from cake_drake.learning import rl
-
-    if rl.is_rl(path):
+    rl = _rl(path)
+    if rl is not None:
         return rl.base_cameras(path)
     return camera_features(_config(model_folder(path)))
 
 
 def is_skill_folder(path: Path) -> bool:
     """Whether the checkpoint at ``path`` is a learned skill's (its config says so)."""
-    from cake_drake.learning import rl
-
-    return not rl.is_rl(path) and is_skill(_config(model_folder(path)))
+    return _rl(path) is None and is_skill(_config(model_folder(path)))
 
 
 def describe(path: Path) -> str:
     """What learned the whole-task policy at ``path``, as a run's ``layers`` says it."""
-    from cake_drake.learning import rl
-
-    if rl.is_rl(path):
+    rl = _rl(path)
+    if rl is not None:
         return rl.describe(path)
     return f"imitation, {_config(model_folder(path)).get('type')}"

@@ -9,7 +9,9 @@ slot measured this period (the cubes' poses, the grasp frame, the goal's reading
 ``goal``    the fraction of the goal's facts measured true (the Gym env's reward by default)
 ``success`` 1 at the step the goal is reached: every fact, every stack within 5 mm
 ``reach``   the hand's nearness to the first cube the goal still wants moved (its ``on``
-            facts in order): 1 with the grasp frame at its centre, 0 from 20 cm
+            facts in order): 1 - tanh(d / 20 cm), d the grasp frame's distance from its
+            centre (1 there, 0.24 at 20 cm; never quite 0, so a learner far away is
+            still told which way is better)
 ``lift``    how far the cubes the goal still wants moved stand above where they began,
             1 from one cube's height up (their mean)
 ``place``   each goal-stacked cube's horizontal alignment over the one it goes on while it is
@@ -39,7 +41,7 @@ from cake_drake.scenario import Reward
 from cake_drake.world.scene import CUBE_SIZE
 
 TERMS = tuple(f.name for f in fields(Reward))
-#: ``reach``: the distance (m) from which the hand earns nothing.
+#: ``reach``: the distance scale (m) of the hand's nearness, 1 - tanh(d / REACH_RANGE).
 REACH_RANGE = 0.20
 #: ``place``: the horizontal offset (m) from which a cube earns nothing.
 PLACE_RANGE = 0.010
@@ -80,7 +82,7 @@ def terms(
            "lost": float(progress.lost)}  # fmt: skip
     if moving:
         cube = positions[index[moving[0][1]]]
-        out["reach"] = max(0.0, 1.0 - float(np.linalg.norm(hand - cube)) / REACH_RANGE)
+        out["reach"] = 1.0 - math.tanh(float(np.linalg.norm(hand - cube)) / REACH_RANGE)
         rise = [(positions[index[f[1]]][2] - start_z[index[f[1]]]) / CUBE_SIZE for f in moving]
         out["lift"] = float(np.mean(np.clip(rise, 0.0, 1.0)))
     else:  # nothing left to move: as much as these terms give

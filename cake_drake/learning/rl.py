@@ -49,7 +49,7 @@ from gymnasium import spaces as gs
 from cake_drake.errors import InputError
 from cake_drake.formats import read_json_mapping
 from cake_drake.learning.rewards import check_reward
-from cake_drake.scenario import Reward, RlRecipe
+from cake_drake.scenario import RlRecipe
 
 FILE = "rl.json"
 MODEL = "model.zip"
@@ -276,7 +276,8 @@ def _callback(progress: Progress, every: int):
 
 
 def draw_curve(rows: list[dict], path: Path, title: str, window: int = 50) -> None:
-    """Success (over the last ``window`` episodes) and return against environment steps."""
+    """Success (over the last ``window`` episodes, drawn from the tenth on) and return
+    against environment steps."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -291,9 +292,10 @@ def draw_curve(rows: list[dict], path: Path, title: str, window: int = 50) -> No
         start = np.maximum(0, k - window + 1)
         cum_w, cum_r = np.r_[0, np.cumsum(won)], np.r_[0, np.cumsum(ret)]
         n = k - start + 1
-        top.plot(steps, 100 * (cum_w[k + 1] - cum_w[start]) / n, color="C2")
+        full = n >= min(10, max(1, len(rows) // 2))  # a rate over few episodes says little
+        top.plot(steps[full], (100 * (cum_w[k + 1] - cum_w[start]) / n)[full], color="C2")
         bottom.plot(steps, ret, ".", color="C0", alpha=0.25, ms=3)
-        bottom.plot(steps, (cum_r[k + 1] - cum_r[start]) / n, color="C0")
+        bottom.plot(steps[full], ((cum_r[k + 1] - cum_r[start]) / n)[full], color="C0")
     top.set_ylim(-2, 102)
     top.set_ylabel(f"success, last {window} episodes (%)")
     bottom.set_ylabel("episode return")
@@ -583,4 +585,4 @@ class RlPolicy:
         return self.composer.action(answer, observation, base)
 
 
-__all__ = ["Reward", "RlPolicy", "check_recipe", "read_rl", "train_rl"]
+__all__ = ["RlPolicy", "check_recipe", "read_rl", "train_rl"]
