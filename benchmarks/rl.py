@@ -2,7 +2,8 @@
 
 ``--throughput`` steps ``CakeDrake/Stack-v0`` on stack2 (the residual's task, joint
 positions held from the measured joints) and prints steps per second: from the state in
-one process and in Gymnasium's ``make_vec`` with two processes, then with the task's two
+one process and in Gymnasium's ``make_vec`` with two processes (spawned: a forked
+renderer hangs), then with the task's two
 96 x 96 cameras rendering every step, the same two ways; and with the pixel policy
 answering every step in one process (what a residual's training steps through).
 
@@ -77,7 +78,7 @@ def throughput(steps: int) -> None:
             "cake_drake.gym:CakeDrake/Stack-v0", num_envs=2, vectorization_mode="async",
             problem=spec.problem, control_mode=spec.control_mode, placement=spec.placement,
             max_steps=spec.max_steps, obs_mode="state+rgb" if cameras else "state",
-            cameras=list(spec.cameras) or None,
+            cameras=list(spec.cameras) or None, vector_kwargs={"context": "spawn"},
         )  # fmt: skip
         obs, _ = venv.reset(seed=1)
         venv.step(_hold(obs))  # the processes warm
