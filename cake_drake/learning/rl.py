@@ -395,7 +395,6 @@ def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=pri
         venv.close()
     steps = int(model.num_timesteps)
     minutes = (time.perf_counter() - progress.t0) / 60.0
-    log(progress.line(steps))
     model.save(out.path(MODEL))
     with open(out.path(PROGRESS), "w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, ["steps", "return", "length", "success", "wall_s"])
