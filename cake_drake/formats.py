@@ -47,18 +47,28 @@ MAX_NPZ_ARRAY_BYTES = 256 * 2**20
 Shape = tuple[int | str | None, ...]
 
 
-def npz_headers(path: Path, expected: str) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-    """Every array's (shape, dtype) by its npy header, nothing decompressed past it."""
+def npz_headers(
+    path: Path, expected: str, file_limit: int | None = None
+) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Every array's (shape, dtype) by its npy header, nothing decompressed past it.
+
+    Every member of the archive counts: one that is not an array (``np.savez`` writes
+    only ``NAME.npy`` members), a header with a negative dimension, or arrays that add up
+    past :data:`MAX_NPZ_ARRAY_BYTES` are refused before anything is decompressed. The
+    file itself may be at most ``file_limit`` bytes (default: the inputs' limit,
+    ``MAX_INPUT_BYTES``; an uncompressed kept episode with its frames may be larger).
+    """
     from cake_drake.symbolic.sexpr import MAX_INPUT_BYTES
 
+    limit = MAX_INPUT_BYTES if file_limit is None else file_limit
     if path.exists() and not path.is_file():
         raise InputError(f"{path}: not a regular file; {expected}")
     if not path.is_file():
         raise InputError(f"{path}: no such file ({expected})")
-    if path.stat().st_size > MAX_INPUT_BYTES:
+    if path.stat().st_size > limit:
         raise InputError(
             f"{path}: {path.stat().st_size / 1e6:.0f} MB is too large "
-            f"(at most {MAX_INPUT_BYTES // 2**20} MiB); {expected}"
+            f"(at most {limit // 2**20} MiB); {expected}"
         )
     if not zipfile.is_zipfile(path):
         raise InputError(
@@ -69,8 +79,14 @@ def npz_headers(path: Path, expected: str) -> dict[str, tuple[tuple[int, ...], n
     try:
         with zipfile.ZipFile(path) as archive:
             for info in archive.infolist():
-                if not info.filename.endswith(".npy"):
+                if info.is_dir():
                     continue
+                if not info.filename.endswith(".npy"):
+                    raise InputError(
+                        f"{path}: member {info.filename!r} is not an array (an .npz holds "
+                        f"NAME.npy members only); {expected}"
+                    )
+                name = info.filename[:-4]
                 with archive.open(info) as f:
                     major, _ = np.lib.format.read_magic(f)
                     read = (
@@ -79,46 +95,68 @@ def npz_headers(path: Path, expected: str) -> dict[str, tuple[tuple[int, ...], n
                         else np.lib.format.read_array_header_2_0
                     )
                     shape, _, dtype = read(f)
-                total += int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if any(int(d) < 0 for d in shape):
+                    raise InputError(
+                        f"{path}: array {name!r} claims shape {tuple(shape)}, with a negative "
+                        f"dimension; {expected}"
+                    )
+                total += int(np.prod(shape, dtype=object)) * max(dtype.itemsize, 1)
                 if total > MAX_NPZ_ARRAY_BYTES:
                     raise InputError(
                         f"{path}: its arrays hold more than {MAX_NPZ_ARRAY_BYTES // 2**20} MiB "
-                        f"({info.filename[:-4]!r} has shape {shape}); {expected}"
+                        f"({name!r} has shape {tuple(shape)}); {expected}"
                     )
-                out[info.filename[:-4]] = (tuple(shape), dtype)
+                out[name] = (tuple(int(d) for d in shape), dtype)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise InputError(f"{path}: unreadable ({e}); {expected}") from None
     return out
 
 
-def read_npz(path: str | Path, expected: str, shapes: Mapping[str, Shape]) -> dict[str, np.ndarray]:
-    """The arrays of ``shapes`` from the .npz at ``path``, checked (see the module).
+#: The dtype kinds an array may have: numbers (the default), or text.
+NUMBERS, TEXT = "biuf", "U"
+
+
+def read_npz(
+    path: str | Path,
+    expected: str,
+    shapes: Mapping[str, Shape],
+    optional: Mapping[str, Shape] | None = None,
+    kinds: Mapping[str, str] | None = None,
+    file_limit: int | None = None,
+) -> dict[str, np.ndarray]:
+    """The arrays of ``shapes`` (and of ``optional``, where present) from the .npz at
+    ``path``, checked (see the module).
 
     ``expected`` says what the file should be (the end of every message); an array of
-    ``shapes`` that is missing, not numbers, of another shape, or unreadable (a truncated
-    file) is one line naming it. Other arrays are only looked at by their headers.
+    ``shapes`` that is missing, of another kind (``kinds``: NAME -> dtype kinds, numbers
+    by default), of another shape, or unreadable (a truncated file) is one line naming
+    it. Other arrays are only looked at by their headers, never decompressed.
     """
     path = Path(path)
-    headers = npz_headers(path, expected)
-    for name, want in shapes.items():
+    headers = npz_headers(path, expected, file_limit)
+    kinds = dict(kinds or {})
+    wanted = {**{n: w for n, w in (optional or {}).items() if n in headers}, **shapes}
+    for name, want in wanted.items():
         if name not in headers:
             raise InputError(f"{path}: missing array {name!r}; {expected} holds "
                              f"{', '.join(shapes)}")  # fmt: skip
         shape, dtype = headers[name]
-        if dtype.kind not in "biuf":
-            raise InputError(f"{path}: array {name!r} must hold numbers, not {dtype}")
+        allowed = kinds.get(name, NUMBERS)
+        if dtype.kind not in allowed or dtype.fields is not None:
+            said = "text" if allowed == TEXT else "numbers"
+            raise InputError(f"{path}: array {name!r} must hold {said}, not {dtype}")
         if len(shape) != len(want) or any(
             isinstance(w, int) and s != w for s, w in zip(shape, want, strict=False)
         ):
             shown = "(" + ", ".join("any" if w is None else str(w) for w in want) + ")"
             raise InputError(f"{path}: array {name!r} has shape {shape}; expected {shown}")
-    lengths = {headers[n][0][0] for n, w in shapes.items() if w and w[0] == "N"}
+    lengths = {headers[n][0][0] for n, w in wanted.items() if w and w[0] == "N"}
     if len(lengths) > 1:
-        said = ", ".join(f"{n} {headers[n][0][0]}" for n, w in shapes.items() if w and w[0] == "N")
+        said = ", ".join(f"{n} {headers[n][0][0]}" for n, w in wanted.items() if w and w[0] == "N")
         raise InputError(f"{path}: its arrays disagree on the number of samples ({said})")
     try:
         with np.load(path, allow_pickle=False) as data:
-            return {name: np.asarray(data[name]) for name in shapes}
+            return {name: np.asarray(data[name]) for name in wanted}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise InputError(f"{path}: unreadable ({e}); {expected}") from None
 
@@ -133,42 +171,31 @@ def save_npz(path: str | Path, samples: dict[str, np.ndarray], actions: list[str
     tmp.replace(path)
 
 
-REQUIRED = ("t", "q", "gripper")
+#: A trajectory's arrays: the ones it must hold, and those it may (a run writes them all).
+TRAJECTORY = {"t": ("N",), "q": ("N", 7), "gripper": ("N",)}
+TRAJECTORY_OPTIONAL = {
+    "qd": ("N", 7), "qdd": ("N", 7), "phase": ("N",), "action": ("N",),
+    "phases": (None,), "actions": (None,),
+}  # fmt: skip
+REQUIRED = tuple(TRAJECTORY)
 
 
 def load_npz(path: str | Path) -> dict[str, np.ndarray]:
-    """Read a ``trajectory.npz``; bad files give one clear line."""
+    """Read a ``trajectory.npz``: the arrays a trajectory has (see
+    :mod:`cake_drake.geometric.trajectory`), each checked for its shape and kind; bad
+    files give one clear line."""
     path = Path(path)
     expected = "expected a trajectory.npz written by python -m cake_drake.run"
-    npz_headers(path, expected)  # refused unread: not a file, too large, not an archive
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if not hasattr(data, "files"):  # a bare .npy array, not an archive
-                raise InputError(f"{path}: a single .npy array, not an .npz archive; {expected}")
-            out = {k: data[k] for k in data.files}
-    except FileNotFoundError:
-        raise InputError(f"{path}: no such file ({expected})") from None
-    except InputError:
-        raise
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, TypeError) as e:
-        raise InputError(f"{path}: not a readable .npz trajectory ({e}); {expected}") from None
-    numeric = [k for k in ("t", "q", "gripper") if k in out and out[k].dtype.kind not in "iuf"]
-    if numeric:
-        raise InputError(
-            f"{path}: array {numeric[0]!r} must hold numbers, not {out[numeric[0]].dtype}"
-        )
-    missing = [k for k in REQUIRED if k not in out]
-    if missing:
-        raise InputError(
-            f"{path}: missing array {missing[0]!r}; a trajectory needs {', '.join(REQUIRED)}"
-        )
+    out = read_npz(
+        path, expected, TRAJECTORY, TRAJECTORY_OPTIONAL, {"phases": TEXT, "actions": TEXT}
+    )
     t, q = out["t"], out["q"]
-    if q.ndim != 2 or q.shape[1] != 7 or len(t) != len(q) or len(t) < 4:
+    if len(t) < 4:
         raise InputError(
             f"{path}: q has shape {q.shape} for {len(t)} times; expected (N, 7) with N >= 4"
         )
-    if not np.all(np.diff(t) > 0):
-        raise InputError(f"{path}: times in 't' must strictly increase")
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
         raise InputError(f"{path}: 't' and 'q' must be finite numbers")
+    if not np.all(np.diff(t) > 0):
+        raise InputError(f"{path}: times in 't' must strictly increase")
     return out

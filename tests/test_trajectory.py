@@ -224,7 +224,7 @@ def _write(path, **arrays):
         (lambda p: (p.write_text("not an archive\n"), p)[1], "not a readable .npz"),
         (lambda p: _write(p, t=np.arange(5.0), gripper=np.zeros(5)), "missing array 'q'"),
         (lambda p: _write(p, **{**_good(), "q": np.zeros((5, 6))}), r"expected \(N, 7\)"),
-        (lambda p: _write(p, **{**_good(), "q": np.zeros((4, 7))}), r"expected \(N, 7\)"),
+        (lambda p: _write(p, **{**_good(), "q": np.zeros((4, 7))}), "disagree on the number"),
         (lambda p: _write(p, **{**_good(), "t": np.array([0, 1, 1, 2, 3.0])}), "increase"),
         (lambda p: _write(p, **{**_good(), "q": np.full((5, 7), np.nan)}), "finite"),
     ],
@@ -252,3 +252,90 @@ def test_broken_npz_files_are_input_errors_too(tmp_path, content):
         path.write_bytes(content)
     with pytest.raises(InputError):
         load_npz(path)
+
+
+def _zip(path, members: dict[str, bytes]):
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        for name, data in members.items():
+            z.writestr(name, data)
+    return path
+
+
+def _npy(array) -> bytes:
+    import io
+
+    f = io.BytesIO()
+    np.save(f, array)
+    return f.getvalue()
+
+
+def _npy_header(shape, descr="<f8") -> bytes:
+    import io
+
+    f = io.BytesIO()
+    header = {"descr": descr, "fortran_order": False, "shape": shape}
+    np.lib.format._write_array_header(f, header, (1, 0))
+    return f.getvalue()
+
+
+@pytest.mark.parametrize(
+    "arrays, message",
+    [
+        ({"t": np.zeros((5, 2))}, r"array 't' has shape \(5, 2\)"),
+        ({"actions": np.array("(pick-up a)")}, r"array 'actions' has shape \(\)"),
+        ({"phases": np.array("idle")}, r"array 'phases' has shape \(\)"),
+        ({"actions": np.arange(3.0)}, "array 'actions' must hold text"),
+        ({"phase": np.zeros((5, 1))}, r"array 'phase' has shape \(5, 1\)"),
+        ({"qd": np.zeros((5, 6))}, r"array 'qd' has shape \(5, 6\)"),
+        ({"gripper": np.zeros(5, dtype=[("a", "<f8")])}, "must hold numbers"),
+    ],
+    ids=["t-2d", "actions-0d", "phases-0d", "actions-numbers", "phase-2d", "qd-6", "structured"],
+)
+def test_every_array_of_a_trajectory_is_checked_for_shape_and_kind(tmp_path, arrays, message):
+    # Each of these passed the reader once and ended in a traceback from Drake or NumPy.
+    path = _write(tmp_path / "trajectory.npz", **{**_good(), **arrays})
+    with pytest.raises(InputError, match=message):
+        load_npz(path)
+
+
+def test_a_member_that_is_not_an_array_is_refused_before_it_is_decompressed(tmp_path):
+    # 300 MiB of zeros under a name without .npy: a few hundred kB on disk; counted as
+    # nothing by a reader that looks at .npy members only, then read in full.
+    members = {f"{k}.npy": _npy(v) for k, v in _good().items()}
+    members["padding"] = bytes(300 * 2**20)
+    path = _zip(tmp_path / "trajectory.npz", members)
+    assert path.stat().st_size < 2 * 2**20
+    with pytest.raises(InputError, match="member 'padding' is not an array"):
+        load_npz(path)
+
+
+def test_a_negative_dimension_cannot_cancel_out_the_real_arrays(tmp_path):
+    from cake_drake.formats import npz_headers
+
+    members = {f"{k}.npy": _npy(v) for k, v in _good().items()}
+    members["minus.npy"] = _npy_header((-(2**25), 8))  # -2 GiB first: the sum stays 0 ...
+    members["big.npy"] = _npy_header((2**25, 8))  # ... after 2 GiB, claimed with nothing behind
+    path = _zip(tmp_path / "trajectory.npz", members)
+    with pytest.raises(InputError, match="negative dimension|more than 256 MiB"):
+        npz_headers(path, "a trajectory")
+    with pytest.raises(InputError, match="negative dimension|more than 256 MiB"):
+        load_npz(path)
+
+
+def test_a_run_given_a_damaged_reference_stops_in_one_line_before_simulating(tmp_path):
+    import subprocess
+    import sys
+
+    members = {f"{k}.npy": _npy(v) for k, v in _good(8).items()}
+    members["notes"] = bytes(64 * 2**20)
+    ref = _zip(tmp_path / "ref.npz", members)
+    out = tmp_path / "out"
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--reference", str(ref), "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "member 'notes' is not an array" in r.stderr
+    assert not out.exists()

@@ -31,6 +31,7 @@ from matplotlib.figure import Figure
 from cake_drake.dynamic.analysis import settling
 from cake_drake.errors import ExecutionError, InputError
 from cake_drake.execution import Logs
+from cake_drake.formats import read_npz
 from cake_drake.outputs.files import OutputDir
 from cake_drake.pipeline import check, run, run_inputs
 from cake_drake.scenario import ComputedTorque, JointPd, Recorded, Scenario, resolve_path
@@ -134,14 +135,24 @@ def study(
     return table, results
 
 
+#: The arrays of a replay's ``logs.npz`` the study reads (:class:`Logs`' fields; the
+#: optional ones where the run logged them).
+LOG_ARRAYS = {
+    "t": ("N",), "q": ("N", 7), "v": ("N", 7), "q_d": ("N", 7), "v_d": ("N", 7),
+    "a_d": ("N", 7), "fingers_d": ("N",), "phase": ("N",), "action": ("N",),
+    "tau_commanded": ("N", 7), "tau_applied": ("N", 7),
+}  # fmt: skip
+LOG_OPTIONAL = {"tau_requested": ("N", 7), "gravity": ("N", 7), "fingers": ("N",)}
+
+
 def _replay(out: Path, row: dict, kp: list[float]) -> Replay:
     """A finished row of the study's sweep, with the logs its run kept."""
     if row["status"] != "done":
         raise ExecutionError(
             f"the replay with Kd = {row['controller.kd']:g} failed: {row['error']}"
         )
-    with np.load(out / row["folder"] / "logs.npz") as data:
-        logs = Logs(**{name: data[name] for name in data.files})
+    path = out / row["folder"] / "logs.npz"
+    logs = Logs(**read_npz(path, "a run's logs.npz", LOG_ARRAYS, LOG_OPTIONAL))
     return Replay(row["controller.kd"], kp[0], bool(row["success"]), row["message"], logs)
 
 

@@ -253,29 +253,48 @@ def record(
     return report
 
 
+#: What a kept episode is, for messages.
+KEPT = "a kept episode (episodes/ep_SEED.npz, as python -m cake_drake.record keeps it)"
+#: What a kept episode holds (``_keep``); ``N`` the episode's frames.
+EPISODE_ARRAYS = {"states": ("N", None), "environment": ("N", None), "actions": ("N", None),
+                  "task": ()}  # fmt: skip
+EPISODE_OPTIONAL = {"actors": ("N",), "executed": ("N", None), "skills": ("N", None),
+                    "grounds": ("N", None)}  # fmt: skip
+
+
 def _load(path: Path, row: dict, images: bool = True) -> Episode:
-    """A kept episode (``_keep``'s npz and row); one kept before who acted was recorded
-    was the demonstrator's alone."""
-    with np.load(path, allow_pickle=False) as z:
-        frames = {k[6:]: z[k] for k in z.files if images and k.startswith("image_")}
-        actions = z["actions"]
-        has = set(z.files)
-        actors = z["actors"] if "actors" in has and z["actors"].shape else None
-        executed = z["executed"] if "executed" in has and z["executed"].shape else actions
-        skills, grounds = _skill_frames(z, len(actions))
-        return Episode(
-            row["seed"], row["success"], row["reason"], row["steps"], row["wall_s"],
-            str(z["task"]), row["blocks"], (), z["states"], z["environment"], actions, frames,
-            np.zeros(len(actions), np.int64) if actors is None else actors, executed,
-            skills, grounds,
-        )  # fmt: skip
+    """A kept episode (``_keep``'s npz and row), read by the checked reader: every array's
+    kind and shape checked, one line naming the file otherwise. One kept before who acted
+    was recorded was the demonstrator's alone."""
+    from cake_drake.formats import MAX_NPZ_ARRAY_BYTES, TEXT, npz_headers, read_npz
+
+    headers = npz_headers(path, KEPT, MAX_NPZ_ARRAY_BYTES)
+    # An episode kept before a field was recorded holds it as None (an object array).
+    optional = {k: v for k, v in EPISODE_OPTIONAL.items() if headers.get(k, ((), None))[0]}
+    if images:
+        optional.update({k: ("N", None, None, 3) for k in headers if k.startswith("image_")})
+    z = read_npz(path, KEPT, EPISODE_ARRAYS, optional, {"task": TEXT}, MAX_NPZ_ARRAY_BYTES)
+    frames = {k[6:]: v for k, v in z.items() if k.startswith("image_")}
+    actions = z["actions"]
+    actors = z.get("actors")
+    executed = z.get("executed", actions)
+    skills, grounds = _skill_frames(path, z, len(actions))
+    return Episode(
+        row["seed"], row["success"], row["reason"], row["steps"], row["wall_s"],
+        str(z["task"]), row["blocks"], (), z["states"], z["environment"], actions, frames,
+        np.zeros(len(actions), np.int64) if actors is None else actors, executed,
+        skills, grounds,
+    )  # fmt: skip
 
 
-def _skill_frames(z, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _skill_frames(path: Path, z: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
     """An episode's ground actions per frame; none for one kept before they were recorded."""
-    from cake_drake.policy.observations import NO_GROUND_ACTION, SKILL_SIZE
+    from cake_drake.policy.observations import GROUND_ACTION_SIZE, NO_GROUND_ACTION, SKILL_SIZE
 
-    if "skills" in z.files and z["skills"].shape == (n, SKILL_SIZE):
+    if "skills" in z and z["skills"].shape == (n, SKILL_SIZE):
+        if "grounds" not in z or z["grounds"].shape != (n, GROUND_ACTION_SIZE):
+            raise InputError(f"{path}: array 'grounds' must have shape ({n}, "
+                             f"{GROUND_ACTION_SIZE}), beside its skills")  # fmt: skip
         return z["skills"], z["grounds"]
     return np.zeros((n, SKILL_SIZE), np.float32), np.tile(NO_GROUND_ACTION, (n, 1))
 
@@ -334,8 +353,11 @@ def _ran(root: Path, seed: int, report: dict) -> np.ndarray:
     path = root / "episodes" / f"ep_{seed}.npz"
     if not path.is_file():
         raise InputError(f"{path}: missing; a noisy recording replays what ran, kept there")
-    with np.load(path, allow_pickle=False) as z:
-        return z["executed"]
+    from cake_drake.formats import MAX_NPZ_ARRAY_BYTES, read_npz
+
+    return read_npz(path, KEPT, {"executed": (None, None)}, file_limit=MAX_NPZ_ARRAY_BYTES)[
+        "executed"
+    ]
 
 
 def replay_check(root: Path, workers: int) -> dict:
