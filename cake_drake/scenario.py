@@ -44,6 +44,7 @@ from cake_drake.errors import InputError
 from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
 from cake_drake.symbolic import DEFAULT_PLANNER
+from cake_drake.symbolic.learned import PREFIX as LEARNED_AT
 from cake_drake.symbolic.sexpr import read_text
 from cake_drake.world.cameras import Camera
 from cake_drake.world.faults import FaultConfig, Knock, Move, RandomFault, Slip
@@ -80,7 +81,9 @@ class Task:
     generate: Generate | None = None
     #: Execute this plan file (plan.txt, .soln, sas_plan) instead of planning; validated first.
     plan: str = ""
-    #: A planner of the registry (``python -m cake_drake.plan --help``) or module:attribute.
+    #: A planner of the registry (``python -m cake_drake.plan --help``), module:attribute,
+    #: or ``learned@DIR``: a learned planner's checkpoint, DIR a scenario path like the
+    #: files above (relative to the scenario file's folder).
     planner: str = DEFAULT_PLANNER
     time_limit: float | None = None  # s, for the planner
 
@@ -402,26 +405,30 @@ def portable_path(path: str | Path) -> str:
 
 
 def _scenario_paths(scenario: Scenario):
-    """(getter, setter) pairs for every path field, for resolving and saving."""
-    yield scenario.task, "domain"
-    yield scenario.task, "problem"
+    """(section, field, prefix) for every path field, for resolving and saving: the field's
+    value is ``prefix`` then the path (``learned@DIR``: a learned planner's folder)."""
+    yield scenario.task, "domain", ""
+    yield scenario.task, "problem", ""
     if scenario.task.plan:
-        yield scenario.task, "plan"
+        yield scenario.task, "plan", ""
+    if scenario.task.planner.startswith(LEARNED_AT) and scenario.task.planner != LEARNED_AT:
+        yield scenario.task, "planner", LEARNED_AT
     if isinstance(scenario.reference, Recorded) and scenario.reference.path:
-        yield scenario.reference, "path"
+        yield scenario.reference, "path", ""
     if isinstance(scenario.reference, Policy) and scenario.reference.checkpoint:
-        yield scenario.reference, "checkpoint"
+        yield scenario.reference, "checkpoint", ""
     if getattr(scenario.controller, "residual", ""):
-        yield scenario.controller, "residual"
+        yield scenario.controller, "residual", ""
     if scenario.motion.skills:
-        yield scenario.motion, "skills"
+        yield scenario.motion, "skills", ""
 
 
 def resolved(scenario: Scenario, base: Path | None) -> Scenario:
     """A copy with every path absolute (or a package URL), relative ones taken from ``base``."""
     out = _copy(scenario)
-    for section, name in _scenario_paths(out):
-        setattr(section, name, portable_path(resolve_path(getattr(section, name), base)))
+    for section, name, prefix in _scenario_paths(out):
+        path = getattr(section, name)[len(prefix) :]
+        setattr(section, name, prefix + portable_path(resolve_path(path, base)))
     return out
 
 

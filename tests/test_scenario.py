@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -103,6 +104,47 @@ def test_relative_paths_are_taken_from_the_scenario_file(tmp_path):
     assert s.task.problem == str(tmp_path / "p.pddl")
     assert s.reference.path == str(tmp_path.parent / "t.npz")
     assert s.task.domain == "package://cake_drake/pddl/blocksworld.pddl"
+
+
+@pytest.mark.parametrize(
+    "planner, expected",
+    [
+        ("learned@pl", "learned@{tmp}/pl"),
+        ("learned@../pl", "learned@{parent}/pl"),
+        ("learned@package://cake_drake/planners/blocks", "learned@package://cake_drake/planners/blocks"),
+        ("learned@{root}/models/planners/blocks", "learned@package://cake_drake/planners/blocks"),
+        ("learned", "learned"),
+        ("astar-lmcut", "astar-lmcut"),
+        ("examples.pid_controller:make", "examples.pid_controller:make"),
+    ],
+)  # fmt: skip
+def test_a_learned_planners_folder_is_a_scenario_path(tmp_path, planner, expected):
+    # learned@DIR names a folder: like every path of a scenario, taken from the file's
+    # folder and saved absolute (or as a package URL); other planner names are names.
+    f = tmp_path / "s.yaml"
+    f.write_text(f"task: {{planner: '{planner.format(root=ROOT)}'}}\n")
+    got = load_scenario(f).task.planner
+    assert got == expected.format(tmp=tmp_path.resolve(), parent=tmp_path.resolve().parent)
+
+
+@pytest.mark.slow
+def test_a_scenario_with_learned_at_a_folder_beside_it_runs_from_any_working_folder(tmp_path):
+    shutil.copytree(ROOT / "models" / "planners" / "blocks", tmp_path / "pl")
+    f = tmp_path / "s.yaml"
+    f.write_text("task: {planner: learned@pl, problem: package://cake_drake/pddl/stack2.pddl}\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    out = tmp_path / "out"
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--scenario", str(f), "--out", str(out),
+         "--quiet", "--no-render"],
+        capture_output=True, text=True, cwd=elsewhere, timeout=600,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    # The saved scenario names the folder absolute: it runs again from anywhere.
+    saved = load_scenario(out / "scenario.yaml")
+    assert saved.task.planner == f"learned@{(tmp_path / 'pl').resolve()}"
+    assert f"planner: learned@{(tmp_path / 'pl').resolve()}" in (out / "scenario.yaml").read_text()
 
 
 @pytest.mark.parametrize("path", sorted(SCENARIOS.glob("*.yaml")), ids=lambda p: p.stem)

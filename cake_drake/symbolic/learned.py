@@ -12,7 +12,10 @@ two. Nothing in it counts the blocks or knows their names: the same weights
 read 3 blocks or 50, and renaming or reordering the blocks changes nothing.
 
 A plan is made by rolling the network's choices out in the symbolic model:
-each step scores the applicable actions and takes the best one. A state seen
+each step scores the applicable actions and takes the best one; a domain's static
+preconditions (the renamed variant's ``(cube ?c)``) are applicability too, so an action
+the problem never allows is never offered, and a goal that only such actions reach is
+the classical planners' "no plan exists", with their proof. A state seen
 twice (a loop), a step budget of four actions per block (what moving every
 block twice costs) or the time limit ends it with :class:`NoPlanError`
 naming the reason; the planner registry validates every plan it returns.
@@ -29,7 +32,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -39,8 +42,12 @@ from threadpoolctl import threadpool_limits
 
 from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError, NoPlanError
+from cake_drake.formats import npz_headers, read_npz
+from cake_drake.symbolic.diagnose import diagnose
+from cake_drake.symbolic.grounding import check_action, ground_all, relaxed_reachable
 from cake_drake.symbolic.pddl import GroundAction, Problem
-from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_view
+from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
+from cake_drake.symbolic.sexpr import MAX_INPUT_BYTES
 
 #: What a learned planner's ``planner.json`` says it is.
 KIND = "cake_drake.learned_planner"
@@ -339,9 +346,12 @@ def load_planner(path: str | Path) -> LearnedPlanner:
 
     ``planner.json`` must say it is a learned planner of this format, with an
     architecture this version reads; ``weights.npz`` must hold exactly the arrays
-    that architecture needs, with their shapes, all finite. Nothing is unpickled.
-    Checked checkpoints are remembered by their files' bytes (a digest), never by
-    their names or times.
+    that architecture needs, with their shapes, all finite numbers. Either file over
+    :data:`~cake_drake.symbolic.sexpr.MAX_INPUT_BYTES` is refused unread, and the
+    weights are read by the project's one checked reader
+    (:func:`cake_drake.formats.read_npz`): every array is looked at by its npy header
+    before anything is decompressed, and nothing is unpickled. Checked checkpoints are
+    remembered by their files' bytes (a digest), never by their names or times.
     """
     folder = Path(path)
     if not folder.exists():
@@ -355,11 +365,34 @@ def load_planner(path: str | Path) -> LearnedPlanner:
             raise _bad(
                 folder, f"{name} is missing (a checkpoint holds planner.json and weights.npz)"
             )
-        try:
-            digest.update(p.read_bytes())
-        except OSError as e:
-            raise _bad(p, f"unreadable ({e.strerror})") from None
+        digest.update(_bounded_bytes(p))
     return _load_checked(folder, digest.hexdigest())
+
+
+def _bounded_bytes(p: Path) -> bytes:
+    """A checkpoint file's bytes; one over :data:`MAX_INPUT_BYTES` is refused unread."""
+    try:
+        size = p.stat().st_size
+        if size > MAX_INPUT_BYTES:
+            raise _bad(
+                p, f"{size / 1e6:.0f} MB is too large (at most {MAX_INPUT_BYTES // 2**20} MiB)"
+            )
+        with p.open("rb") as f:  # bounded even if the file grows meanwhile
+            data = f.read(MAX_INPUT_BYTES + 1)
+    except OSError as e:
+        raise _bad(p, f"unreadable ({e.strerror or e})") from None
+    if len(data) > MAX_INPUT_BYTES:
+        raise _bad(p, f"too large (more than {MAX_INPUT_BYTES // 2**20} MiB)")
+    return data
+
+
+def _checked_npz(w_path: Path, read):
+    """``read()`` (a call of :mod:`cake_drake.formats`), its one-line refusal said as a
+    checkpoint's."""
+    try:
+        return read()
+    except InputError as e:
+        raise _bad(w_path, str(e).removeprefix(f"{w_path}: ")) from None
 
 
 @lru_cache(maxsize=8)
@@ -367,20 +400,19 @@ def _load_checked(folder: Path, digest: str) -> LearnedPlanner:
     del digest  # the cache's key: the same bytes are the same checkpoint
     cfg_path, w_path = folder / "planner.json", folder / "weights.npz"
     try:
-        cfg = json.loads(cfg_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        cfg = json.loads(_bounded_bytes(cfg_path).decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
         where = f" (line {e.lineno})" if isinstance(e, json.JSONDecodeError) else ""
         raise _bad(cfg_path, f"unreadable JSON{where}: {e}") from None
     cfg = _check_config(cfg_path, cfg)
     width = cfg["architecture"]["width"]
     expected = weight_shapes(width)
-    try:
-        with np.load(w_path, allow_pickle=False) as npz:
-            weights = {k: np.asarray(npz[k], np.float64) for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as e:
-        raise _bad(w_path, f"unreadable ({type(e).__name__}: {e})") from None
-    missing = sorted(set(expected) - set(weights))
-    extra = sorted(set(weights) - set(expected))
+    what = f"expected the weights of a learned planner of width {width} ({cfg_path.name})"
+    # Every array by its header first (nothing decompressed): exactly the arrays of the
+    # architecture, each of its shape; then read_npz reads them, numbers only.
+    headers = _checked_npz(w_path, lambda: npz_headers(w_path, what))
+    missing = [k for k in expected if k not in headers]
+    extra = sorted(set(headers) - set(expected))
     if missing or extra:
         raise _bad(
             w_path,
@@ -389,13 +421,16 @@ def _load_checked(folder: Path, digest: str) -> LearnedPlanner:
             + (f"; unknown {', '.join(extra)}" if extra else ""),
         )
     for k, shape in expected.items():
-        if weights[k].shape != shape:
+        if headers[k][0] != shape:
             raise _bad(
                 w_path,
-                f"array {k} has shape {weights[k].shape}, but width {width} "
+                f"array {k} has shape {headers[k][0]}, but width {width} "
                 f"({cfg_path.name}) needs {shape}",
             )
-        if not np.isfinite(weights[k]).all():
+    arrays = _checked_npz(w_path, lambda: read_npz(w_path, what, expected))
+    weights = {k: np.asarray(arrays[k], np.float64) for k in expected}
+    for k, a in weights.items():
+        if not np.isfinite(a).all():
             raise _bad(w_path, f"array {k} holds NaN or infinite values")
     return LearnedPlanner(folder, cfg, weights)
 
@@ -476,6 +511,71 @@ def graph_of(init, goal, index: dict[str, int], where: str = "<state>") -> Graph
     )
 
 
+class DomainActions:
+    """The domain's own ground action for each of :func:`applicable`'s canonical actions.
+
+    Called with one ``(head, block, other block or -1)``, it gives the first schema's
+    action (in the domain's order) with that meaning whose parameter types fit and whose
+    static preconditions (predicates no action changes, such as the renamed variant's
+    ``(cube ?c)``) hold in ``:init``; None when no schema's do: an action the problem
+    never allows, which the rollout never offers the network. ``restricted`` is False
+    when every action is allowed (no static precondition, one block type): then nothing
+    needs checking.
+    """
+
+    def __init__(self, problem: Problem, blocks: list[str]):
+        self.problem, self.blocks = problem, blocks
+        roles = blocksworld_roles(problem.domain)
+        statics = problem.domain.static_predicates
+        self._schemas = []
+        for name, role in roles.actions.items():
+            schema = problem.domain.actions[name]
+            self._schemas.append((role, schema, [f for f in schema.pre if f[0] in statics]))
+        self.restricted = len(roles.block_types) > 1 or any(s for _, _, s in self._schemas)
+        self._memo: dict[tuple[str, int, int], GroundAction | None] = {}
+
+    def __call__(self, action: tuple[str, int, int]) -> GroundAction | None:
+        if action in self._memo:
+            return self._memo[action]
+        head, x, y = action
+        kind = PICK if head in ("pick-up", "unstack") else PLACE
+        found = None
+        for role, schema, static in self._schemas:
+            if role.kind != kind or (role.support is None) != (y < 0):
+                continue
+            args = [""] * schema.arity
+            args[role.block] = self.blocks[x]
+            if role.support is not None:
+                args[role.support] = self.blocks[y]
+            ground = GroundAction(schema.name, tuple(args))
+            if check_action(self.problem, ground) is not None:
+                continue
+            binding = {var: arg for (var, _), arg in zip(schema.params, args, strict=True)}
+            if all(tuple(binding.get(t, t) for t in f) in self.problem.init for f in static):
+                found = ground
+                break
+        self._memo[action] = found
+        return found
+
+    def allows(self, action: tuple[str, int, int]) -> bool:
+        """True when the problem has a ground action for ``action`` (see the class)."""
+        return self(action) is not None
+
+
+def unreachable_goal(problem: Problem) -> NoPlanError | None:
+    """The classical planners' proof that no plan exists, where the domain restricts its
+    actions: goal facts unreachable even with delete effects ignored (a block that no
+    action may pick up, whose place the goal changes). None when none is found."""
+    reached, _ = relaxed_reachable(problem.init, ground_all(problem))
+    if problem.goal <= reached:
+        return None
+    found = "; ".join(diagnose(problem))
+    return NoPlanError(
+        f"no plan exists for problem '{problem.name}': proved before search, by the delete "
+        f"relaxation; diagnosis: {found}"
+    )
+
+
 @dataclass(frozen=True)
 class Rollout:
     """A learned planner's answer: the actions (by block index) and the states visited."""
@@ -485,9 +585,17 @@ class Rollout:
 
 
 def roll_out(
-    learned: LearnedPlanner, graph: Graph, deadline: float | None = None, budget: int | None = None
+    learned: LearnedPlanner,
+    graph: Graph,
+    deadline: float | None = None,
+    budget: int | None = None,
+    allowed: Callable[[tuple[str, int, int]], bool] | None = None,
 ) -> Rollout:
-    """Greedy rollout of the network's choices from ``graph``'s state until its goal holds."""
+    """Greedy rollout of the network's choices from ``graph``'s state until its goal holds.
+
+    Only the :func:`applicable` actions that ``allowed`` accepts (all when None) are
+    scored: the problem's static preconditions (:class:`DomainActions`).
+    """
     n = len(graph.below)
     budget = 4 * n + 2 if budget is None else budget
     state, seen, taken = graph.below, {graph.below}, []
@@ -497,6 +605,8 @@ def roll_out(
         if deadline is not None and time.perf_counter() > deadline:
             return Rollout(tuple(taken), "time")
         actions = applicable(state)
+        if allowed is not None:
+            actions = [a for a in actions if allowed(a)]
         if not actions:
             return Rollout(tuple(taken), "stuck")
         here = Graph(
@@ -517,17 +627,27 @@ def plan_learned(
     """The learned planner's plan for ``problem`` in its domain's own action names.
 
     :class:`NoPlanError` (the planners' exit 1) names why a rollout ended without
-    reaching the goal: a loop, the step budget or the time limit.
+    reaching the goal: a loop, the step budget or the time limit. Where the domain
+    restricts its actions (static preconditions such as ``(cube ?c)``), the network is
+    offered only the actions the problem allows, and a goal those never reach is the
+    classical planners' "no plan exists", with the same proof and diagnosis.
     """
     t0 = time.perf_counter()
     learned = load_planner(checkpoint_of(spec))
     blocks, graph = read_problem(problem)
+    ground = DomainActions(problem, blocks)
+    if ground.restricted:
+        proof = unreachable_goal(problem)
+        if proof is not None:
+            raise proof
     deadline = None if time_limit is None else t0 + time_limit
     # The network's products are small (tens of rows): BLAS threads only compete with
     # each other and with the rest of the machine (a 50-block plan: 0.11 s on one thread,
     # 0.15 s on two cores, seconds beside other work).
     with threadpool_limits(limits=1, user_api="blas"):
-        out = roll_out(learned, graph, deadline)
+        out = roll_out(
+            learned, graph, deadline, allowed=ground.allows if ground.restricted else None
+        )
     if out.reason != "goal":
         n = len(blocks)
         why = {
@@ -541,16 +661,7 @@ def plan_learned(
             f"no plan found for problem '{problem.name}': the learned planner ({learned.path}) "
             f"gave up: {why}; this does not prove that no plan exists (try --planner auto)"
         )
-    roles = blocksworld_view(problem).roles
-    actions = tuple(
-        roles.action(
-            PICK if kind in ("pick-up", "unstack") else PLACE,
-            blocks[x],
-            None if y < 0 else blocks[y],
-        )
-        for kind, x, y in out.actions
-    )
-    return actions, learned
+    return tuple(ground(a) for a in out.actions), learned
 
 
 def describe(learned: LearnedPlanner) -> str:
