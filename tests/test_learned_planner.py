@@ -8,6 +8,7 @@ import re
 import shutil
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -148,7 +149,7 @@ def _damaged(tmp_path: Path, how: str) -> Path:
     [
         ("missing", "no such learned planner folder"),
         ("empty", "planner.json is missing"),
-        ("truncated", "weights.npz: not a learned planner checkpoint: unreadable"),
+        ("truncated", "weights.npz: not a learned planner checkpoint: not a readable .npz"),
         ("not json", "planner.json: not a learned planner checkpoint: unreadable JSON (line 1)"),
         ("not a mapping", "holds a list, not a mapping"),
         ("other kind", "field 'kind' is 'a policy'"),
@@ -167,6 +168,56 @@ def test_a_damaged_checkpoint_is_one_line_and_exit_2_before_anything_runs(tmp_pa
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and words in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def _refused_unread(tmp_path: Path, how: str) -> Path:
+    folder = tmp_path / how.replace(" ", "_")
+    folder.mkdir()
+    shutil.copy(SHIPPED / "planner.json", folder)
+    shutil.copy(SHIPPED / "weights.npz", folder)
+    weights, cfg = folder / "weights.npz", folder / "planner.json"
+    if how == "structured":
+        w = dict(np.load(weights))
+        w["enc_b"] = np.zeros(w["enc_b"].shape, dtype=[("x", "<f8"), ("y", "<f8")])
+        np.savez(weights, **w)
+    elif how == "hidden huge array":
+        # A few bytes whose npy header claims 1 GiB: refused by its header, so nothing
+        # is decompressed (np.load would allocate it and read on).
+        with zipfile.ZipFile(weights, "a", zipfile.ZIP_DEFLATED) as z, z.open("junk.npy", "w") as f:
+            header = {"descr": "<f8", "fortran_order": False, "shape": (2**27,)}
+            np.lib.format.write_array_header_1_0(f, header)
+            f.write(b"\0" * 64)
+    elif how == "large json":
+        # Valid JSON (the shipped file and 17 MiB of spaces), over the inputs' limit.
+        cfg.write_text(cfg.read_text() + " " * (17 * 2**20))
+    return folder
+
+
+NOT_A_CHECKPOINT = "not a learned planner checkpoint: "
+
+
+@pytest.mark.parametrize(
+    "how, words",
+    [
+        ("structured", f"weights.npz: {NOT_A_CHECKPOINT}array 'enc_b' must hold numbers"),
+        (
+            "hidden huge array",
+            f"weights.npz: {NOT_A_CHECKPOINT}its arrays hold more than 256 MiB "
+            "('junk' has shape (134217728,))",
+        ),
+        ("large json", f"planner.json: {NOT_A_CHECKPOINT}18 MB is too large (at most 16 MiB)"),
+    ],
+)
+def test_a_checkpoint_is_read_by_the_checked_reader_and_refused_unread(tmp_path, how, words):
+    # weights.npz goes through cake_drake.formats.read_npz (every array by its header
+    # before anything is decompressed); planner.json over 16 MiB is refused unread.
+    folder = _refused_unread(tmp_path, how)
+    with pytest.raises(InputError) as e:
+        load_planner(folder)
+    assert words in str(e.value)
+    r = _cli("cake_drake.plan", "--planner", f"learned@{folder}")
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and words in r.stderr and "Traceback" not in r.stderr
 
 
 def test_a_domain_the_network_cannot_read_is_named(tmp_path):
@@ -188,6 +239,65 @@ def test_a_problem_with_objects_that_are_not_blocks_is_named(tmp_path):
     problem.write_text(text.replace("- block)", "- block s1 - sponge)"))
     with pytest.raises(InputError, match=r"s1 is not a block \(block types: block\)"):
         solve_problem(load_problem(domain, problem), "learned")
+
+
+RENAMED = ROOT / "models/pddl/variants/blocksworld-renamed.pddl"
+
+
+def _without_cube(tmp_path: Path, block: str) -> Path:
+    """tests/data/renamed_5.pddl with no (cube BLOCK): the renamed variant's static
+    precondition of both picks, so BLOCK can never be picked up."""
+    text = (DATA / "renamed_5.pddl").read_text()
+    assert text.count(f"(cube {block})") == 1
+    problem = tmp_path / f"no_cube_{block}.pddl"
+    problem.write_text(text.replace(f"(cube {block})", ""))
+    return problem
+
+
+def test_a_goal_that_moves_a_block_no_action_may_pick_is_no_plan_as_the_classical_say(tmp_path):
+    # c lacks (cube c) but the goal puts it on d: no plan exists. The learned planner says
+    # so as the classical planners do (exit 1, their proof and diagnosis), never a plan
+    # that picks c up (the registry's "returned an invalid plan", exit 2).
+    problem_file = _without_cube(tmp_path, "c")
+    problem = load_problem(RENAMED, problem_file)
+    with pytest.raises(NoPlanError) as classical:
+        solve_problem(problem, "auto")
+    with pytest.raises(NoPlanError) as learned:
+        solve_problem(problem, "learned")
+    assert str(learned.value) == str(classical.value)
+    r = _cli("cake_drake.plan", str(RENAMED), str(problem_file), "--planner", "learned")
+    assert r.returncode == 1, r.stderr
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    assert "no plan exists for problem 'renamed-5'" in r.stderr
+    assert "goal (atop c d) is unreachable" in r.stderr
+
+
+def test_the_network_is_offered_only_the_actions_the_static_preconditions_allow(
+    tmp_path, monkeypatch
+):
+    # e lacks (cube e), lies clear on the floor and the goal leaves it there: a plan
+    # exists that never picks e up, and picking it up is never among the choices.
+    from cake_drake.symbolic import learned as module
+
+    offered = []
+    scores = module.scores
+
+    def spy(weights, graph, actions):
+        offered.extend(actions)
+        return scores(weights, graph, actions)
+
+    monkeypatch.setattr(module, "scores", spy)
+    problem = parse_problem(
+        load_domain(RENAMED),
+        """(define (problem e-stays) (:domain cube-stacking) (:objects a b c d e)
+             (:init (cube a) (cube b) (cube c) (cube d) (on-floor c) (atop b c) (atop a b)
+                    (free a) (on-floor d) (free d) (on-floor e) (free e) (gripper-free))
+             (:goal (and (atop c d) (atop b c) (atop a b))))""",
+    )
+    plan = solve_problem(problem, "learned")
+    assert validate_plan(problem, plan.actions).ok
+    e = sorted(problem.objects).index("e")
+    assert offered and not [a for a in offered if a[0] in ("pick-up", "unstack") and a[1] == e]
 
 
 def test_no_plan_within_its_budget_is_the_no_plan_exit_with_the_reason(tmp_path):
@@ -213,12 +323,92 @@ def test_learned_at_a_folder_is_never_taken_for_a_plugin(tmp_path):
     assert plan.length == 10
 
 
+def _pddl_facts(below, names) -> list[str]:
+    facts = []
+    for i, j in enumerate(below):
+        if j == -1:
+            facts.append(f"(on-table {names[i]})")
+        elif j == -2:
+            facts.append(f"(holding {names[i]})")
+        else:
+            facts.append(f"(on {names[i]} {names[j]})")
+    covered = {j for j in below if j >= 0}
+    facts += [f"(clear {names[i]})" for i, j in enumerate(below) if i not in covered and j != -2]
+    if -2 not in below:
+        facts.append("(arm-empty)")
+    return facts
+
+
+def _goal_distances(sample, tmp_path) -> tuple[dict[frozenset, int], list[str]]:
+    """Every state's number of actions to the sample's goal, found by pyperplan's own
+    grounding of models/pddl/blocksworld.pddl (nothing of the learned planner's model):
+    the whole state space searched from the sample's state, then breadth first from the
+    goal states backwards (every edge kept both ways as pyperplan grounds it)."""
+    from collections import deque
+
+    from pyperplan.grounding import ground
+    from pyperplan.pddl.parser import Parser
+
+    g = sample.graph
+    names = [f"b{i}" for i in range(len(g.below))]
+    goal = [f"(on {names[i]} {names[j]})" if j >= 0 else f"(on-table {names[i]})"
+            for i, j in enumerate(g.goal_below) if j != -3]  # fmt: skip
+    goal += [f"(clear {names[i]})" for i, c in enumerate(g.goal_clear) if c]
+    goal += [f"(holding {names[i]})" for i, h in enumerate(g.goal_held) if h]
+    goal += ["(arm-empty)"] if g.goal_arm_empty else []
+    problem = tmp_path / "p.pddl"
+    problem.write_text(
+        f"(define (problem p) (:domain blocksworld) (:objects {' '.join(names)})\n"
+        f"(:init {' '.join(_pddl_facts(g.below, names))})\n(:goal (and {' '.join(goal)})))\n"
+    )
+    task = ground(Parser(str(ROOT / "models/pddl/blocksworld.pddl"), str(problem)).parse_problem(
+        Parser(str(ROOT / "models/pddl/blocksworld.pddl")).parse_domain()))  # fmt: skip
+    start, seen, edges = task.initial_state, {task.initial_state}, {}
+    queue = deque([start])
+    while queue:
+        s = queue.popleft()
+        edges[s] = [op.apply(s) for op in task.operators if op.applicable(s)]
+        for t in edges[s]:
+            if t not in seen:
+                seen.add(t)
+                queue.append(t)
+    dist = {s: 0 for s in seen if task.goal_reached(s)}
+    queue = deque(dist)
+    back = {s: [] for s in seen}
+    for s, ts in edges.items():
+        for t in ts:
+            back[t].append(s)
+    while queue:
+        t = queue.popleft()
+        for s in back[t]:
+            if s not in dist:
+                dist[s] = dist[t] + 1
+                queue.append(s)
+    return dist, names
+
+
 def test_training_labels_are_exact(tmp_path):
-    # Every optimal action leads one step closer, and the goal state is at distance 0.
+    # The labels against an independent count: pyperplan grounds the domain file, every
+    # state's distance to the goal is searched there, and an action is labelled optimal
+    # exactly when it leads to a state one action closer.
     space = Space(4)
     assert len(space.states) == 125  # 73 arrangements with the arm empty, 52 holding one
-    data = samples(PlannerRecipe(goals=8, states_per_goal=4), log=lambda *_: None)
-    assert data and all(s.optimal.any() for s in data)
+    data = samples(PlannerRecipe(min_blocks=3, max_blocks=4, goals=12, states_per_goal=4),
+                   log=lambda *_: None)  # fmt: skip
+    assert len(data) >= 24
+    checked = 0
+    for sample in data:
+        dist, names = _goal_distances(sample, tmp_path)
+        here = dist[frozenset(_pddl_facts(sample.graph.below, names))]
+        assert here > 0  # a labelled state is not at its goal
+        for action, optimal in zip(sample.actions, sample.optimal, strict=True):
+            after = list(sample.graph.below)
+            kind, x, y = action
+            after[x] = -2 if kind in ("pick-up", "unstack") else (-1 if kind == "put-down" else y)
+            closer = dist[frozenset(_pddl_facts(after, names))] == here - 1
+            assert bool(optimal) == closer, (sample.graph, action)
+            checked += 1
+    assert checked > 100
 
 
 @pytest.mark.slow
@@ -232,4 +422,18 @@ def test_a_run_with_the_learned_top_replans_after_a_fault_and_draws_its_cake(tmp
     assert "relational network" in summary["layers"]["symbolic"]["what"]
     assert summary["layers"]["geometric"]["kind"] == "classical"
     assert "symbolic learned (learned, relational network" in r.stderr
-    assert (tmp_path / "cake.png").stat().st_size > 10_000
+    # The picture says it too: the top tier in the learned colour, the others classical.
+    from matplotlib.colors import to_rgb
+    from matplotlib.image import imread
+
+    from cake_drake.outputs.cake import COLOURS, LAYERS, cake_figure
+
+    image = imread(tmp_path / "cake.png")[:, :, :3]
+    fig = cake_figure(summary["layers"])
+    ax = fig.axes[0]
+    boxes = sorted((p for p in ax.patches if p.get_width() > 5), key=lambda p: -p.get_y())
+    for name, box in zip(LAYERS, boxes, strict=True):
+        px, py = ax.transData.transform((box.get_x() + box.get_width() - 0.4, box.get_y() + 0.15))
+        colour = image[int(image.shape[0] - py), int(px)]
+        kind = "learned" if name == "symbolic" else "classical"
+        assert np.allclose(colour, to_rgb(COLOURS[kind]), atol=0.02), name
