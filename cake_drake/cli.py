@@ -185,6 +185,7 @@ def _time_limit(value: float | None) -> float | None:
 def scenario_from_args(args: argparse.Namespace):
     """The scenario file (or the default) with every given flag written into it."""
     from cake_drake.scenario import (
+        LEARNED_AT,
         Planned,
         Recorded,
         Scenario,
@@ -215,6 +216,9 @@ def scenario_from_args(args: argparse.Namespace):
             setattr(task, name, portable_path(value))
     if args.planner is not None:
         task.planner = args.planner
+        prefix, _, folder = args.planner.partition(LEARNED_AT)
+        if not prefix and folder:  # a learned planner's folder: from here, saved absolute
+            task.planner = LEARNED_AT + portable_path(folder)
     if args.time_limit is not None:
         task.time_limit = _time_limit(args.time_limit)
     if args.ik is not None:
@@ -1038,8 +1042,8 @@ def main_evaluate(argv: list[str] | None = None) -> int:
 
         failed = [r.pop("final") for r in rows if "final" in r]
         if failed:
-            _failures_picture([r for r in rows if not r["success"]], failed,
-                              out.path("failures.png"))  # fmt: skip
+            _figure(_failures_picture, [r for r in rows if not r["success"]], failed,
+                    out.path("failures.png"))  # fmt: skip
         keys = ["seed", "blocks", "success", "steps", "wall_s", "reason", "task"]
         keys += ["repeats", "replans", "sim_s"] if skills else ["missing"]
         for r in rows if not skills else ():  # a column of text: "(on a b) (on b c)"
@@ -1047,7 +1051,7 @@ def main_evaluate(argv: list[str] | None = None) -> int:
         out.path("results.parquet"), out.path("results.csv")  # declared, written below
         write_table(sorted(rows, key=lambda r: r["seed"]), out.staging, keys, exact=True)
         out.write_json("summary.json", summary)
-        _success_plot(summary, out.path("success.png"))
+        _figure(success_plot, summary, out.path("success.png"))
         out.commit()
     lo, hi = summary["ci95"]
     print(
@@ -1056,6 +1060,17 @@ def main_evaluate(argv: list[str] | None = None) -> int:
         f"{summary['mean_steps']:.0f} steps{_places_text(summary)}; outputs in {args.out}/"
     )
     return EXIT_OK
+
+
+def _figure(draw: Callable[..., None], *args) -> None:
+    """Draw a figure; where drawing fails, say so in one line on stderr and go on: a
+    picture must never cost the user the numbers written beside it."""
+    try:
+        draw(*args)
+    except Exception as e:  # noqa: BLE001 - any failure of the drawing library
+        name = Path(args[-1]).name
+        print(f"warning: {name} not drawn ({type(e).__name__}: {e}); the numbers are "
+              "written", file=sys.stderr)  # fmt: skip
 
 
 def _places_text(summary: dict) -> str:
@@ -1103,18 +1118,19 @@ OUT, or run it with reference: !Policy {checkpoint: OUT}. --resume continues OUT
 training up to --steps.
 
 --dagger ROUNDS trains the recipe on DATASET, then each round rolls the checkpoint out for
---episodes-per-round N episodes (default 10) of the recording's task (report.json's spec),
-on seeds after the recording's, on the local pool (--workers) or Ray (--ray), the expert's
-action executed instead with probability --beta B (default 0; drawn from the episode's
-seed); the recording's demonstrator (the closed-loop expert) labels every visited state,
-and an episode ends where it is done or the step budget runs out. Each round writes a new
-LeRobot dataset, OUT/data/round-K (the recording's kept episodes and every DAgger episode
-so far; a frame's actor is 0 where the expert acted, 1 where the learner did), and
-fine-tunes the last checkpoint on it for --round-steps steps (default: the recipe's).
-The last round's checkpoint is OUT's, as any training's; each training keeps its folder
-in OUT/rounds/round-K. Prints, per round, the episodes, the frames added, the
-expert-labelled frames in all and the learner's success in the round's rollouts. State
-policies only (--inputs state).
+--episodes-per-round N episodes (default %(per_round)d) of the recording's task
+(report.json's spec), on seeds after the recording's, on the local pool (--workers) or
+Ray (--ray), the expert's action executed instead with probability --beta B (default 0;
+drawn from the episode's seed); the recording's demonstrator (the closed-loop expert)
+labels every visited state, and an episode ends where it is done or the step budget runs
+out. Each round writes a new LeRobot dataset, OUT/data/round-K (the recording's kept
+episodes and every DAgger episode so far; a frame's actor is 0 where the expert acted, 1
+where the learner did), and fine-tunes the last checkpoint on it for --round-steps steps
+(default: the recipe's). The last round's checkpoint is OUT's, as any training's; each
+training keeps its folder in OUT/rounds/round-K. Prints, per round, the episodes, the
+frames added, the expert-labelled frames in all and the learner's success in the round's
+rollouts. OUT changes only when the last round has finished (an error or Ctrl-C in any
+round leaves it as it was). State policies only (--inputs state).
 
 --residual fits the dynamic layer's learned residual instead: DATASET... are run folders
 written with outputs.logs: true (their logs.npz); the residual, tau = tau_IDC + r(q, v,
@@ -1124,11 +1140,12 @@ fifth of each run held out. OUT gets residual.json; a scenario uses it with cont
 !ComputedTorque {residual: OUT}.
 
 --planner trains the symbolic layer's learned planner instead, from no dataset: every
-state of Blocksworlds of --blocks MIN MAX blocks (default 3 6, at most 7) is enumerated,
-each sampled goal's exact distances give every state's optimal actions, and a relational
-network learns to put its choice on them (--steps, default 3000; --batch-size, default
-64; --seed). OUT gets planner.json and weights.npz: plan with it as --planner learned@OUT
-(python -m cake_drake.plan, run, a scenario's task.planner).
+state of Blocksworlds of --blocks MIN MAX blocks (default %(min_blocks)d %(max_blocks)d,
+at most %(most)d) is enumerated, each sampled goal's exact distances give every state's
+optimal actions, and a relational network learns to put its choice on them (--steps,
+default %(steps)d; --batch-size, default %(batch_size)d; --seed). OUT gets planner.json
+and weights.npz: plan with it as --planner learned@OUT (python -m cake_drake.plan, run,
+a scenario's task.planner).
 
 --rl SUITE --name TASK learns TASK of the scenario file SUITE from a reward instead, from
 no dataset: Stable-Baselines3's PPO (or SAC) on CakeDrake/Stack-v0 with the task's
@@ -1149,10 +1166,22 @@ could not be written; 130 interrupted.
 """
 
 
+#: The largest seed a training takes: NumPy's and PyTorch's generators take 32 bits, and
+#: DAgger seeds round K with seed + K.
+TRAIN_SEED_MAX = 2**31 - 1
+#: DAgger's rollouts a round unless --episodes-per-round says otherwise.
+EPISODES_PER_ROUND = 10
+
+
 def train_parser() -> argparse.ArgumentParser:
+    from dataclasses import asdict
+
+    from cake_drake.learning.planner import MAX_BLOCKS, PlannerRecipe
+
     p = CliParser(
         prog="python -m cake_drake.train",
-        description=TRAIN_DOC,
+        description=TRAIN_DOC
+        % {**asdict(PlannerRecipe()), "most": MAX_BLOCKS, "per_round": EPISODES_PER_ROUND},
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
@@ -1171,7 +1200,8 @@ def train_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument(
         "--blocks", type=int, nargs=2, metavar=("MIN", "MAX"),
-        help="--planner: the problems' sizes (default 3 6)",
+        help=f"--planner: the problems' sizes (default {PlannerRecipe.min_blocks} "
+        f"{PlannerRecipe.max_blocks})",
     )  # fmt: skip
     p.add_argument(
         "--rl",
@@ -1194,7 +1224,10 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, help="training steps (default: the recipe's)")
     p.add_argument("--batch-size", type=int, help="batch size (default: the recipe's)")
     p.add_argument("--device", default="auto", help="auto | cpu | cuda (default auto)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed", type=int, default=0,
+        help=f"the training's seed, 0 to {TRAIN_SEED_MAX} (default 0; DAgger's round K: +K)",
+    )  # fmt: skip
     p.add_argument("--weights", help="a vision backbone's weights file (default: from scratch)")
     p.add_argument("--resume", action="store_true", help="continue OUT's last checkpoint")
     p.add_argument("--dagger", type=int, metavar="ROUNDS", help="rounds of DAgger after training")
@@ -1212,6 +1245,8 @@ def main_train(argv: list[str] | None = None) -> int:
     from cake_drake.learning.train import for_inputs, for_policy, recipe_of, train
 
     args = train_parser().parse_args(argv)
+    if not 0 <= args.seed <= TRAIN_SEED_MAX:  # every mode seeds NumPy's and torch's generators
+        raise InputError(f"--seed {args.seed}: a whole number from 0 to {TRAIN_SEED_MAX}")
     rl_only = {"--name": args.name, "--base": args.base, "--algorithm": args.algorithm,
                "--envs": args.envs}  # fmt: skip
     if args.rl is not None:
@@ -1354,20 +1389,25 @@ def _main_planner(args: argparse.Namespace) -> int:
 
 
 def _main_dagger(args: argparse.Namespace, recipe) -> int:
-    from cake_drake.learning.dagger import check_rounds, dagger, source
+    from cake_drake.learning.dagger import DAGGER_OUTPUTS, check_rounds, dagger, source
+    from cake_drake.outputs.files import OutputDir
 
     if args.resume:
         raise InputError("--resume with --dagger: DAgger starts its folder afresh")
-    per_round = 10 if args.episodes_per_round is None else args.episodes_per_round
+    per_round = EPISODES_PER_ROUND if args.episodes_per_round is None else args.episodes_per_round
     beta = 0.0 if args.beta is None else args.beta
     check_rounds(args.dagger, per_round, beta, args.round_steps)
     source(args.dataset)
     workers = _workers(args.workers)
-    summary = dagger(
-        args.dataset, args.out, recipe, args.dagger, per_round, beta, args.device, args.seed,
-        workers, _ray(args.ray, workers), args.weights, args.round_steps,
-        log=lambda line: print(line, flush=True),
-    )  # fmt: skip
+    # Every round is written into the staging folder and put in place at the end: an
+    # error or Ctrl-C in any round leaves OUT as it was.
+    with OutputDir(args.out, "train --dagger", DAGGER_OUTPUTS, [args.dataset]) as staged:
+        summary = dagger(
+            args.dataset, staged.staging, recipe, args.dagger, per_round, beta, args.device,
+            args.seed, workers, _ray(args.ray, workers), args.weights, args.round_steps,
+            log=lambda line: print(line, flush=True), final=staged.real,
+        )  # fmt: skip
+        staged.commit()
     print(
         f"{args.out}: {recipe.policy} ({recipe.inputs}) trained on {args.dataset} and "
         f"{args.dagger} rounds of DAgger ({summary['dagger']['expert_labelled_frames']} "
@@ -1402,7 +1442,8 @@ def _failures_picture(rows: list[dict], frames: list, path: Path) -> None:
     plt.close(fig)
 
 
-def _success_plot(summary: dict, path: Path) -> None:
+def success_plot(summary: dict, path: Path) -> None:
+    """`evaluate`'s success.png: the success rate per problem size with its 95 % interval."""
     import matplotlib
 
     matplotlib.use("Agg")

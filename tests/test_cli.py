@@ -44,3 +44,39 @@ def test_the_console_script_runs_a_subcommand():
     r = subprocess.run([str(script), "plan"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert "10 actions" in r.stdout
+
+
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ["--planner", "--seed", "18446744073709551616"],
+        ["--planner", "--seed", "-3"],
+        ["--rl", "models/scenarios/learning.yaml", "--name", "stack2", "--seed", "-1"],
+        ["models", "--seed", str(2**31)],
+    ],
+    ids=["planner-2**64", "planner-negative", "rl-negative", "policy-2**31"],
+)
+def test_a_training_seed_out_of_range_is_one_line_before_any_work(tmp_path, flags):
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.train", *flags, "--out", str(tmp_path / "o")],
+        capture_output=True, text=True, cwd=Path(__file__).resolve().parent.parent, timeout=120,
+    )  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "--seed" in r.stderr and "0 to 2147483647" in r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_train_help_gives_the_recipes_own_defaults(capsys):
+    from dataclasses import fields
+
+    from cake_drake.learning.planner import MAX_BLOCKS, PlannerRecipe
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    default = {f.name: f.default for f in fields(PlannerRecipe)}
+    assert f"--steps, default {default['steps']};" in text
+    assert f"--batch-size, default {default['batch_size']};" in text
+    assert (f"(default {default['min_blocks']} {default['max_blocks']}, at most "
+            f"{MAX_BLOCKS})") in text  # fmt: skip
+    assert f"(default {default['min_blocks']} {default['max_blocks']})" in text  # --blocks

@@ -291,3 +291,57 @@ def test_dagger_on_a_dataset_with_no_task_or_no_episodes_is_one_line(recordings,
     r = cake("train", str(lost), "--out", str(tmp_path / "run"), "--dagger", "1")
     one_line(r, 2, "ep_0.npz: missing", "--dagger appends to the recording's kept episodes")
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.slow
+def test_a_damaged_kept_episode_is_one_line_before_anything_trains(recordings, tmp_path):
+    import shutil
+
+    folder, reports = recordings
+    damaged = tmp_path / "damaged"
+    shutil.copytree(folder / "plain", damaged)
+    kept = damaged / "episodes" / f"ep_{reports['plain']['seeds'][0]}.npz"
+    kept.write_bytes(kept.read_bytes()[: kept.stat().st_size // 2])  # cut short
+    r = cake("train", str(damaged), "--out", str(tmp_path / "run"), "--steps", "2",
+             "--device", "cpu", "--dagger", "1", "--workers", "1")  # fmt: skip
+    one_line(r, 2, str(kept))
+    assert not (tmp_path / "run").exists()
+    shaped = tmp_path / "shaped"  # readable, but an array of the wrong shape
+    shutil.copytree(folder / "plain", shaped)
+    kept = shaped / "episodes" / kept.name
+    with np.load(kept) as z:
+        arrays = dict(z)
+    np.savez(kept, **{**arrays, "environment": arrays["environment"][:-1]})
+    r = cake("train", str(shaped), "--out", str(tmp_path / "run"), "--steps", "2",
+             "--device", "cpu", "--dagger", "1", "--workers", "1")  # fmt: skip
+    one_line(r, 2, str(kept), "disagree on the number of samples")
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.slow
+def test_dagger_stopped_in_round_0_leaves_its_folder_as_it_was(recordings, tmp_path):
+    import signal
+    import time
+
+    folder, _ = recordings
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "mine.txt").write_text("the user's\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.train", str(folder / "plain"), "--out", str(out),
+         "--steps", "100000", "--batch-size", "4", "--device", "cpu", "--dagger", "1",
+         "--workers", "1"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    deadline = time.monotonic() + 300
+    # Its folders are made in the staging folder just before round 0 trains.
+    while not list(out.glob(".staging-*/rollouts")) and proc.poll() is None:
+        assert time.monotonic() < deadline, "round 0 never started"
+        time.sleep(0.2)
+    time.sleep(3)  # into round 0's training
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert sorted(p.name for p in out.iterdir()) == ["mine.txt"], list(out.iterdir())

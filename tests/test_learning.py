@@ -647,3 +647,21 @@ def test_the_shipped_state_policy_stacks_on_its_documented_seed(tmp_path):
     assert summary["success"] and summary["policy"]["said_done"]
     assert summary["policy"]["steps"] < summary["policy"]["max_steps"]
     assert max(summary["stack_offsets_mm"].values()) < 5.0
+
+
+def test_the_wilson_interval_holds_the_rate_and_the_figure_draws_every_count(tmp_path):
+    # 6/6 once gave an upper bound of 0.9999999999999999, below the rate 1.0, and the
+    # figure's error bars went negative: evaluate lost every result it had.
+    from cake_drake.cli import success_plot
+    from cake_drake.learning.evaluation import wilson
+
+    for n in range(1, 101):
+        for k in range(n + 1):
+            lo, hi = wilson(k, n)
+            assert 0.0 <= lo <= k / n <= hi <= 1.0, (k, n, lo, hi)
+    for n in (2, 6, 7, 50):
+        sizes = {"5": {"episodes": n, "success": n, "ci95": list(wilson(n, n))},
+                 "6": {"episodes": n, "success": 0, "ci95": list(wilson(0, n))}}  # fmt: skip
+        summary = {"per_size": sizes, "policy": "p", "control_mode": "joint_position"}
+        success_plot(summary, tmp_path / f"success-{n}.png")
+        assert (tmp_path / f"success-{n}.png").stat().st_size > 5_000

@@ -96,6 +96,8 @@ def source(root: Path) -> tuple[dict, EpisodeSpec, list[Path]]:
             f"{where}: missing; --dagger appends to the recording's kept episodes "
             f"(episodes/ep_SEED.npz, {need})"
         )
+    for _ in _episodes(files, [_row(f, s) for f, s in zip(files, seeds, strict=True)]):
+        pass  # each read by the checked reader now, not after round 0 has trained
     return report, spec, files
 
 
@@ -162,9 +164,14 @@ def dagger(
     weights: str | None = None,
     round_steps: int | None = None,
     log: Callable[[str], None] = print,
+    final: Path | None = None,
 ) -> dict:
     """Behaviour cloning on the recording at ``root``, then ``rounds`` of DAgger into
-    ``out`` (see the module); its summary (``out/train.json``)."""
+    ``out`` (see the module); its summary (``out/train.json``).
+
+    ``out`` is where the work is written: the command's staging folder, put in place of
+    ``final`` (the folder the user named) only when every round has finished
+    (:class:`cake_drake.outputs.files.OutputDir`); the files name ``final``."""
     from cake_drake.learning import dataset
     from cake_drake.learning import train as training
     from cake_drake.learning.recording import _keep, _write_whole
@@ -283,4 +290,16 @@ def dagger(
         },
     }
     (out / "train.json").write_text(json.dumps(summary, indent=2) + "\n")
+    if final is not None:
+        _repoint(out, Path(final))
     return summary
+
+
+def _repoint(staging: Path, final: Path) -> None:
+    """Name ``final`` instead of ``staging`` in the JSON files written there (the
+    trainings' records and LeRobot's configs), before they are put in place."""
+    old, new = json.dumps(str(staging))[1:-1], json.dumps(str(final))[1:-1]
+    for path in staging.rglob("*.json"):
+        text = path.read_text(encoding="utf-8")
+        if old in text:
+            path.write_text(text.replace(old, new), encoding="utf-8")

@@ -22,13 +22,15 @@ from cake_drake.scenario import SKILL_POLICY
 
 
 def wilson(successes: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """The 95 % Wilson score interval of a success rate."""
+    """The 95 % Wilson score interval of a success rate: always within [0, 1] and
+    holding the rate itself (rounding alone would put the upper bound of 6/6 at
+    0.9999999999999999, below the rate)."""
     if n == 0:
         return 0.0, 1.0
     p = successes / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
+    return max(0.0, min(p, centre - half)), min(1.0, max(p, centre + half))
 
 
 def _evaluate_one(args) -> dict:

@@ -55,6 +55,9 @@ from cake_drake.symbolic.learned import (
     weight_shapes,
 )
 
+#: The largest problems the exact labels enumerate (every state of every size).
+MAX_BLOCKS = 7
+
 
 @dataclass(frozen=True)
 class PlannerRecipe:
@@ -312,10 +315,14 @@ def _loss(score, labels, groups, n_graphs: int):
 
 def check_recipe(recipe: PlannerRecipe) -> None:
     """:class:`InputError` for a recipe that cannot train (said as the flag that set it)."""
-    if recipe.min_blocks < 2 or recipe.max_blocks > 7 or recipe.min_blocks > recipe.max_blocks:
+    if (
+        recipe.min_blocks < 2
+        or recipe.max_blocks > MAX_BLOCKS
+        or recipe.min_blocks > recipe.max_blocks
+    ):
         raise InputError(
             f"--blocks {recipe.min_blocks} {recipe.max_blocks}: the exact labels enumerate "
-            "every state, so the sizes are 2 to 7 blocks, the smaller first"
+            f"every state, so the sizes are 2 to {MAX_BLOCKS} blocks, the smaller first"
         )
     if recipe.steps < 1:
         raise InputError(f"--steps {recipe.steps}: a training takes at least one step")
