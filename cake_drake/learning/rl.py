@@ -39,7 +39,7 @@ import math
 import time
 import zipfile
 from dataclasses import asdict, replace
-from functools import partial
+from functools import lru_cache, partial
 from pathlib import Path
 
 import gymnasium
@@ -237,8 +237,16 @@ class Progress:
 
     def __init__(self, log) -> None:
         self.rows: list[dict] = []
-        self.log = log
+        self._log = log
+        self.logged = -1  # the steps of the last line printed
         self.t0 = time.perf_counter()
+
+    def log(self, steps: int) -> None:
+        """Print the line for ``steps``, once: the callback's at a rollout's end, and the
+        training's last unless the callback has just printed it."""
+        if steps != self.logged:
+            self._log(self.line(steps))
+            self.logged = steps
 
     def episode(self, steps: int, info: dict) -> None:
         ep = info["episode"]
@@ -269,7 +277,7 @@ def _callback(progress: Progress, every: int):
                     progress.episode(self.num_timesteps, info)
             now, before = self.num_timesteps, self.num_timesteps - self.training_env.num_envs
             if now // every > before // every:
-                progress.log(progress.line(now))
+                progress.log(now)
             return True
 
     return Callback()
@@ -336,6 +344,11 @@ def _model(recipe: RlRecipe, venv, seed: int, residual: bool):
         with torch.no_grad():
             last.weight.zero_()
             last.bias.zero_()
+    # A logger of our own, writing nowhere: Stable-Baselines3's default makes an
+    # SB3-<date> folder in TMPDIR at every learn(), left there (the progress is ours).
+    from stable_baselines3.common.logger import Logger
+
+    model.set_logger(Logger(folder=None, output_formats=[]))
     return model
 
 
@@ -395,6 +408,7 @@ def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=pri
         venv.close()
     steps = int(model.num_timesteps)
     minutes = (time.perf_counter() - progress.t0) / 60.0
+    progress.log(steps)  # the last line, where the callback did not print it
     model.save(out.path(MODEL))
     with open(out.path(PROGRESS), "w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, ["steps", "return", "length", "success", "wall_s"])
@@ -479,6 +493,49 @@ def read_rl(folder) -> dict:
     return info
 
 
+def check_weights(folder, info: dict) -> None:
+    """Refuse ``model.zip`` whose network cannot act as ``rl.json`` says, before any
+    episode: weights that Stable-Baselines3's own loader cannot read (the network by
+    PyTorch's ``weights_only`` load), no policy, spaces of other sizes, or values that
+    are not finite. Remembered by the file's bytes."""
+    model = Path(folder) / MODEL
+    h = hashlib.sha256()
+    with open(model, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    _checked_weights(str(model), h.hexdigest(), info["observation_size"], info["action_size"])
+
+
+@lru_cache(maxsize=8)
+def _checked_weights(model: str, sha256: str, observation_size: int, action_size: int) -> None:
+    del sha256  # the cache's key: the same bytes are the same weights
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    try:
+        data, params, _ = load_from_zip_file(model, device="cpu", print_system_info=False)
+    except Exception as e:  # noqa: BLE001 - a user's file: any failure to read it is bad input
+        first = (str(e).strip().splitlines() or [""])[0][:160]
+        raise InputError(f"{model}: its weights cannot be read ({type(e).__name__}: "
+                         f"{first})") from None  # fmt: skip
+    policy = (params or {}).get("policy")
+    if not isinstance(policy, dict) or not policy:
+        raise InputError(f"{model}: holds no policy network (policy.pth)")
+    spaces_said = {
+        "observation_space": (observation_size,),
+        "action_space": (action_size,),
+    }
+    for name, shape in spaces_said.items():
+        got = getattr((data or {}).get(name), "shape", None)
+        if got != shape:
+            raise InputError(f"{model}: its {name} is {got}, where {FILE} says {shape}")
+    for key, tensor in policy.items():
+        values = getattr(tensor, "detach", None)
+        if values is None:
+            raise InputError(f"{model}: policy entry {key!r} is not a tensor")
+        if not bool(values().isfinite().all()):
+            raise InputError(f"{model}: policy entry {key!r} holds NaN or infinite values")
+
+
 def check_folder(path, action_space: str, device: str = "auto", cameras=None) -> dict:
     """Refuse, before anything is built, an RL folder that cannot run here: unreadable,
     another action space than the run's, a residual whose base is missing or is another
@@ -489,6 +546,7 @@ def check_folder(path, action_space: str, device: str = "auto", cameras=None) ->
     info = read_rl(path)
     if device not in ("auto", "cpu"):
         raise InputError(f"{path}: an RL policy acts on the CPU; device {device!r} is not for it")
+    check_weights(path, info)
     if info["action_space"] != action_space:
         raise InputError(f"{path}: learned in {info['action_space']}; the run's action space "
                          f"is {action_space}")  # fmt: skip
