@@ -358,3 +358,20 @@ def test_a_bad_helpers_choice_is_one_line_before_anything_runs(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "outputs.helpers 'sometimes'; choose one of: auto, always, never" in r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_a_run_with_output_helpers_leaves_nothing_in_tmpdir(tmp_path):
+    # The cake is asked for once, while the world is simulated; asking again at the end
+    # (it was not drawn yet: a short run) drew a second one into a folder nobody removed.
+    (tmp_path / "s.yaml").write_text("outputs: {helpers: always, render: false}\n")
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--scenario", "s.yaml", "--mode", "position",
+         "--problem", str(VARIANTS.parent / "stack2.pddl"), "--out", "out"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+        env={**os.environ, "TMPDIR": str(tmp)},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out" / "cake.png").is_file()
+    assert list(tmp.iterdir()) == []

@@ -272,7 +272,7 @@ def write_outputs(
         marks=[(e["time_s"], e["kind"]) for e in execution.monitoring.get("events", [])],
         faults=fault_marks(result.faults, logs),
     )
-    if worker.cake() is None:  # not asked for while the world was simulated
+    if not worker.cake_asked:  # not asked for while the world was simulated
         worker.submit_cake(layers(cake.scenario, plan), cake_title(result.problem, cake))
     try:
         write_plan(plan, out.path("plan.txt"))

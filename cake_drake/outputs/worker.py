@@ -272,11 +272,20 @@ class OutputWorker:
     def submit_cake(self, layers: dict, title: str) -> None:
         """Start drawing the run's cake (:func:`cake_drake.outputs.cake.write_cake`) now,
         while the world is simulated: the layers are known once the plan is. It is drawn
-        into a private folder; :meth:`cake` gives the file once :meth:`wait` returned."""
+        into a private folder; :meth:`cake` gives the file once :meth:`wait` returned.
+        Asked for once: a second call draws nothing (the folder is removed by
+        :meth:`close`)."""
         import tempfile
 
+        if self.cake_asked:
+            return
         self._cake_dir = Path(tempfile.mkdtemp(prefix="cake_drake-cake-"))
         self.submit_plot(layers=layers, path=self._cake_dir / "cake.png", title=title)
+
+    @property
+    def cake_asked(self) -> bool:
+        """Whether :meth:`submit_cake` was called (the cake may still be being drawn)."""
+        return getattr(self, "_cake_dir", None) is not None
 
     def cake(self) -> Path | None:
         """The cake drawn by :meth:`submit_cake`, if it was asked for and is there."""
