@@ -282,6 +282,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
         planner = resolve(
             task.planner, PLANNER_REGISTRY, "planner", budget=lambda problem, limit: limit
         )
+    check_skill_settings(s.motion)
     if isinstance(s.reference, Recorded):
         if not s.reference.path:
             raise InputError("reference: !Recorded needs a path (a trajectory.npz from a run)")
@@ -314,10 +315,9 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     return Checked(s, problem, planner, out, generated)
 
 
-def check_skills(motion) -> None:
-    """A learned geometric layer that can run: its numbers in range, then a skill
-    checkpoint (not a whole-task policy) of the action space asked for, where it can run."""
-    check_folder = load_attribute(SKILL_CHECK, "skill")
+def check_skill_settings(motion) -> None:
+    """The learned skills' settings, checked whether or not ``motion.skills`` names a
+    checkpoint: every number of a scenario is checked before any work, read or not."""
     if motion.skill_action_space not in ("", "joint_position", "ee_delta"):
         raise InputError(
             f"motion.skill_action_space: {motion.skill_action_space!r}; one of joint_position, "
@@ -327,6 +327,13 @@ def check_skills(motion) -> None:
     _range(motion.skill_smooth_s, 0.0, 5.0, "motion.skill_smooth_s", " s")
     _range(motion.skill_ensemble, 0.0, 10.0, "motion.skill_ensemble")
     _range(motion.skill_max_steps, 0, 1_000_000, "motion.skill_max_steps")
+
+
+def check_skills(motion) -> None:
+    """A learned geometric layer that can run (its numbers are checked by
+    :func:`check_skill_settings`): a skill checkpoint (not a whole-task policy) of the
+    action space asked for, where it can run."""
+    check_folder = load_attribute(SKILL_CHECK, "skill")
     if motion.skill_ensemble > 0 and motion.skill_device not in ("cpu", "auto"):
         raise InputError(
             f"motion.skill_ensemble = {motion.skill_ensemble:g} with skill_device "

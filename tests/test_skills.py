@@ -252,6 +252,26 @@ bad:
         assert len(r.stderr.strip().splitlines()) == 1 and not out.exists()
 
 
+def test_skill_settings_are_checked_without_skills_too():
+    # Every number of a scenario is checked before any work, read or not: a setting of
+    # the learned skills, given where the classical layer runs, is refused all the same.
+    import re
+
+    from cake_drake.errors import InputError
+    from cake_drake.pipeline import check
+    from cake_drake.scenario import parse_scenario
+
+    for motion, words in (
+        ("skill_smooth_s: 9", "motion.skill_smooth_s = 9.0 is outside 0 to 5 s"),
+        ("skill_ensemble: -1", "motion.skill_ensemble = -1.0 is outside 0 to 10"),
+        ("skill_rate_hz: 0", "motion.skill_rate_hz = 0.0 is outside 0.5 to 100 Hz"),
+        ("skill_action_space: joints", "motion.skill_action_space: 'joints'"),
+    ):  # fmt: skip
+        s = parse_scenario(f"motion: {{{motion}}}\n")
+        with pytest.raises(InputError, match=re.escape(words)):
+            check(s, write=False)
+
+
 def test_evaluate_runs_a_skill_checkpoint_under_the_named_scenarios_planner(skill, tmp_path):
     out = tmp_path / "eval"
     r = cli("cake_drake.evaluate", str(skill), "--suite", str(LEARNING), "--name", "stack2",
