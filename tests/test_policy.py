@@ -344,3 +344,34 @@ def test_no_generated_episode_starts_with_its_goal_already_holding():
     env = gymnasium.make(ENV_ID, blocks=(3, 8))
     starts = [env.reset(seed=s)[1] for s in range(30)]
     assert not any(info["is_success"] for info in starts)  # seed 25 drew one, now drawn again
+
+
+def test_a_hand_frame_move_keeps_the_hand_pointing_down_whatever_it_asks():
+    """ee_target with ``down``: from a tilted hand, asked to roll, pitch and turn, the hand
+    ends pointing straight down, turned by the measured yaw plus dyaw only."""
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    from cake_drake.geometric.ik import DlsIk, Kinematics
+    from cake_drake.policy.spaces import Counts, ee_target
+    from cake_drake.world.scene import Q_HOME
+
+    kin = Kinematics()
+    ik = DlsIk(kin)
+    home = kin.pose(Q_HOME)
+    tilt = RollPitchYaw(0.15, -0.1, 0.0).ToRotationMatrix()
+    X_WG = RigidTransform(tilt.multiply(home.rotation()), home.translation())
+    R0 = X_WG.rotation().matrix()
+    yaw0 = np.arctan2(R0[1, 0], R0[0, 0])
+    counts = Counts()
+    for droll, dpitch, dyaw in ((0.3, 0.0, 0.0), (0.0, -0.3, 0.2), (0.2, 0.2, -0.3)):
+        delta = np.array([0.01, -0.01, 0.02, droll, dpitch, dyaw])
+        q = ee_target(delta, X_WG, ik, Q_HOME, counts, down=True)
+        assert q is not None and counts.unreachable == 0
+        R = kin.pose(q).rotation().matrix()
+        assert np.allclose(R[:, 2], [0.0, 0.0, -1.0], atol=1e-3), R  # the hand's z: down
+        yaw = np.arctan2(R[1, 0], R[0, 0])
+        assert abs(np.angle(np.exp(1j * (yaw - yaw0 - dyaw)))) < 1e-3
+        assert np.allclose(kin.pose(q).translation(), X_WG.translation() + delta[:3], atol=1e-3)
+    # Without ``down`` the same asks tilt the hand: the test above can tell the two apart.
+    q = ee_target(np.array([0, 0, 0, 0.3, 0, 0]), X_WG, ik, Q_HOME, counts)
+    assert not np.allclose(kin.pose(q).rotation().matrix()[:, 2], [0, 0, -1], atol=1e-2)

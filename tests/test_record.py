@@ -324,13 +324,65 @@ def _damaged_copy(source: Path, dest: Path, damage: str) -> Path:
 def test_a_damaged_recording_is_one_line_and_never_a_download(recorded, tmp_path, damage, words):
     folder, _ = recorded
     ds = _damaged_copy(folder / "ds1", tmp_path / "ds", damage)
-    # Whatever the user's environment says, nothing is fetched.
-    env = {"HF_HUB_OFFLINE": "0", "HF_DATASETS_OFFLINE": "0"}
+    # Whatever the user's environment says, nothing is fetched: every attempt to reach
+    # another machine is watched (and stopped) in the process itself.
+    env = {"HF_HUB_OFFLINE": "0", "HF_DATASETS_OFFLINE": "0", **_watched(tmp_path)}
     r = cake("train", str(ds), "--out", "run", "--steps", "2", "--batch-size", "2",
              "--device", "cpu", cwd=tmp_path, env_extra=env)  # fmt: skip
     assert r.returncode == 2, r.stderr[-2000:]
     assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr[-2000:]
-    assert "huggingface.co" not in r.stderr and not (tmp_path / "run").exists()
+    assert not (tmp_path / "run").exists()
+    assert _attempts(tmp_path) == [], "a damaged recording reached for the network"
+
+
+#: A sitecustomize that records (and refuses) every look-up of another machine's name and
+#: every connection to another machine, through Python's audit hooks.
+_WATCH = """
+import os, sys
+
+_LOG = os.environ["CAKE_DRAKE_NET_LOG"]
+_HERE = ("localhost", "127.0.0.1", "::1", "", None)
+
+
+def _hook(event, args):
+    if event == "socket.getaddrinfo":
+        host = args[0].decode() if isinstance(args[0], bytes) else args[0]
+    elif event == "socket.connect" and isinstance(args[1], tuple):
+        host = args[1][0]
+    else:
+        return
+    if host in _HERE or str(host).startswith("127."):
+        return
+    with open(_LOG, "a") as f:
+        f.write(f"{event} {host}\\n")
+    raise OSError(f"network use watched by the test: {event} {host}")
+
+
+sys.addaudithook(_hook)
+"""
+
+
+def _watched(tmp_path: Path) -> dict:
+    site = tmp_path / "watch"
+    site.mkdir(exist_ok=True)
+    (site / "sitecustomize.py").write_text(_WATCH)
+    log = tmp_path / "net.log"
+    log.write_text("")
+    return {"PYTHONPATH": f"{site}{os.pathsep}{ROOT}", "CAKE_DRAKE_NET_LOG": str(log)}
+
+
+def _attempts(tmp_path: Path) -> list[str]:
+    return (tmp_path / "net.log").read_text().splitlines()
+
+
+def test_the_network_watch_sees_an_attempt(tmp_path):
+    # The watch's own oracle: a process that reaches for a hub is seen.
+    env = {**os.environ, **_watched(tmp_path)}
+    code = "import urllib.request; urllib.request.urlopen('https://huggingface.co', timeout=5)"
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                       timeout=60)  # fmt: skip
+    assert r.returncode != 0
+    assert _attempts(tmp_path) == ["socket.getaddrinfo huggingface.co"]
 
 
 @needs_lerobot
