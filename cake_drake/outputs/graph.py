@@ -34,6 +34,10 @@ def graphviz_svg(source: str, dot: str = "dot", timeout_s: float = 60.0) -> str:
             f"Graphviz program {dot!r} not found on PATH; it draws the Diagram as SVG; "
             + INSTALL_HINT
         )
+    # Not a group of our own (cake_drake.processes): subprocess.run kills `dot` on any
+    # exception while it waits (the timeout, Ctrl-C or SIGTERM raised as an interrupt),
+    # `dot` starts no children, and killed outright we leave it its input's end of file:
+    # it draws one graph, then ends on its own.
     try:
         done = subprocess.run(
             [exe, "-Tsvg"],

@@ -2,20 +2,21 @@
 
 The wheel ships the ``fast-downward.py`` driver and a compiled ``downward``
 binary; we call the driver directly (no unified-planning needed at run time)
-with a wall-clock timeout, since Fast Downward's own limits count CPU time.
+with a wall-clock timeout, since Fast Downward's own limits count CPU time. Its
+processes are a group this process owns (:mod:`cake_drake.processes`): none of them
+outlives the run, whatever ends it.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import os
-import signal
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from cake_drake import processes
 from cake_drake.errors import CakeDrakeError, InputError
 from cake_drake.symbolic.pddl import GroundAction, Problem
 from cake_drake.symbolic.plans import parse_plan_text
@@ -71,21 +72,17 @@ def run(problem: Problem, alias: str, planner: str, time_limit: float | None) ->
         cmd = [sys.executable, str(driver), "--plan-file", "sas_plan", "--alias", alias]
         cmd += [str(dom), str(prob)]
         t0 = time.perf_counter()
-        proc = subprocess.Popen(
-            cmd,
-            cwd=tmp,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            start_new_session=True,  # its own process group, so a timeout kills translate too
-        )
-        try:
-            out, _ = proc.communicate(timeout=time_limit)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
-            return FdResult("limit", time_s=time.perf_counter() - t0)
-        elapsed = time.perf_counter() - t0
+        # A group of its own (driver, translate, search) that ends with this run however
+        # it ends: the limit, an interrupt, an exception, even this process killed.
+        with processes.owned(
+            cmd, cwd=tmp, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        ) as proc:
+            try:
+                out, _ = proc.communicate(timeout=time_limit)
+            except subprocess.TimeoutExpired:
+                processes.stop(proc)
+                return FdResult("limit", time_s=time.perf_counter() - t0)
+            elapsed = time.perf_counter() - t0
         plan_file = Path(tmp) / "sas_plan"
         if proc.returncode == 0 and plan_file.is_file():
             text = plan_file.read_text(encoding="utf-8")
