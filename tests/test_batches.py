@@ -1,4 +1,4 @@
-"""The data path under LeRobot's loop (cake_drake.learning.batches): the same samples as
+"""The data path under LeRobot's loop (cake_drake.learning.data.batches): the same samples as
 LeRobot's own dataset, read from memory, and no frame decoded for a policy that reads none.
 
 Real recordings (Drake, lerobot's writer), LeRobot's own dataset and training loop.
@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from cake_drake.learning import batches
+from cake_drake.learning.data import batches
 
 ROOT = Path(__file__).resolve().parent.parent
 DEMONSTRATIONS = ROOT / "models" / "scenarios" / "demonstrations.yaml"
@@ -101,7 +101,7 @@ def test_a_policy_that_reads_no_camera_decodes_no_frame(recording, monkeypatch):
 def test_train_reads_through_the_columns(recording, tmp_path, monkeypatch):
     """cake_drake.train's LeRobot loop iterates ColumnDataset (no loader workers), and its
     checkpoint is written."""
-    from cake_drake.learning.train import recipe_of, train
+    from cake_drake.learning.training.train import recipe_of, train
 
     made = []
     original = batches.ColumnDataset.__init__

@@ -102,7 +102,7 @@ def recordings(tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_noisy_recording_is_seeded_measured_and_a_dataset_lerobot_loads(recordings):
-    from cake_drake.learning.dataset import read
+    from cake_drake.learning.data.dataset import read
 
     folder, reports = recordings
     noisy = reports["noisy"]
@@ -171,7 +171,7 @@ def dagger_run(recordings):
 
 
 def test_the_expert_gives_up_after_its_repairs_unless_unbounded():
-    from cake_drake.learning.expert import MAX_REPAIRS, ClosedLoopExpert
+    from cake_drake.learning.policies.expert import MAX_REPAIRS, ClosedLoopExpert
 
     bounded, unbounded = ClosedLoopExpert(), ClosedLoopExpert(max_repairs=None)
     for expert in (bounded, unbounded):
@@ -186,8 +186,8 @@ def test_the_expert_gives_up_after_its_repairs_unless_unbounded():
 def test_the_classical_teacher_is_unbounded_unless_its_options_bound_it():
     from dataclasses import replace
 
-    from cake_drake.learning.dagger import labeller
     from cake_drake.learning.rollout import EpisodeSpec
+    from cake_drake.learning.training.dagger import labeller
 
     spec = EpisodeSpec(policy=CLOSED_LOOP, options={"slow": 0.5})
     assert labeller(spec, 0.3).options == {"slow": 0.5, "max_repairs": None}
@@ -200,8 +200,8 @@ def test_the_classical_teacher_is_unbounded_unless_its_options_bound_it():
 
 @pytest.mark.slow
 def test_a_dagger_round_labels_the_learners_states_and_fine_tunes(dagger_run):
-    from cake_drake.learning.checkpoint import make
-    from cake_drake.learning.dataset import read
+    from cake_drake.learning.data.dataset import read
+    from cake_drake.learning.policies.checkpoint import make
 
     folder, out, stdout = dagger_run
     plain = json.loads((folder / "plain" / "report.json").read_text())

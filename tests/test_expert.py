@@ -19,7 +19,7 @@ import gymnasium
 import numpy as np
 import pytest
 
-from cake_drake.learning.expert import make, measured
+from cake_drake.learning.policies.expert import make, measured
 from cake_drake.pipeline import run
 from cake_drake.scenario import Policy, Scenario
 from cake_drake.symbolic import PROBLEM_5

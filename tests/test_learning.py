@@ -203,7 +203,7 @@ def trained(tmp_path_factory):
 
 @pytest.mark.slow
 def test_a_recording_has_environment_state_and_lerobot_loads_it(trained):
-    from cake_drake.learning.dataset import read
+    from cake_drake.learning.data.dataset import read
 
     data = read(trained / "ds")
     frame = data[0]
@@ -242,7 +242,7 @@ def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, po
         assert config["num_train_timesteps"] == 100
         assert (config["noise_scheduler_type"], config["num_inference_steps"]) == (
             "DDIM", part.inference_steps) and 0 < part.inference_steps < 100  # fmt: skip
-    from cake_drake.learning.checkpoint import make
+    from cake_drake.learning.policies.checkpoint import make
 
     env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
                          control_mode="joint_position")  # fmt: skip
@@ -318,7 +318,7 @@ def test_a_checkpoint_acts_in_evaluate_a_run_and_the_gym_env(trained, tmp_path):
     assert r.returncode == 3 and "the policy's step budget of 15 (1.5 s) ran out" in r.stderr
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["policy"]["steps"] == 15 and "ran out" in summary["policy"]["ended"]
-    from cake_drake.learning.checkpoint import make
+    from cake_drake.learning.policies.checkpoint import make
 
     env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
                          control_mode="joint_position")  # fmt: skip
@@ -354,7 +354,7 @@ def test_plain_lerobot_train_trains_on_a_recording(trained, tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     model = tmp_path / "stack2_lerobot" / "checkpoints" / "last" / "pretrained_model"
     assert (model / "config.json").is_file()
-    from cake_drake.learning.checkpoint import check_folder
+    from cake_drake.learning.policies.checkpoint import check_folder
 
     check_folder(tmp_path / "stack2_lerobot", "joint_position", "cpu")  # evaluate takes it
 
@@ -430,7 +430,7 @@ def test_cuda_without_a_gpu_is_refused(tmp_path):
     (tmp_path / "ds" / "meta").mkdir(parents=True)
     r = cake("train", str(tmp_path / "ds"), "--out", str(tmp_path / "o"), "--device", "cuda")
     one_line(r, 2, "device cuda: torch sees no CUDA GPU here")
-    from cake_drake.learning.checkpoint import device_for
+    from cake_drake.learning.policies.lerobot_checkpoint import device_for
 
     with pytest.raises(InputError, match="device cuda: torch sees no CUDA GPU"):
         device_for("cuda")
@@ -577,7 +577,7 @@ def test_make_vec_runs_the_environment_in_two_processes():
 
 #: A policy that builds the goal and never says done: the classical expert, its "done" cut.
 SILENT = """
-from cake_drake.learning.expert import make as expert
+from cake_drake.learning.policies.expert import make as expert
 
 
 class Silent:
@@ -652,7 +652,7 @@ def test_the_shipped_state_policy_stacks_on_its_documented_seed(tmp_path):
 def test_the_wilson_interval_holds_the_rate_and_the_figure_draws_every_count(tmp_path):
     # 6/6 once gave an upper bound of 0.9999999999999999, below the rate 1.0, and the
     # figure's error bars went negative: evaluate lost every result it had.
-    from cake_drake.cli import success_plot
+    from cake_drake.commands.evaluate import success_plot
     from cake_drake.learning.evaluation import wilson
 
     for n in range(1, 101):

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from cake_drake.learning.mlp.configuration_mlp import CakeMLPConfig
-from cake_drake.learning.mlp.modeling_mlp import CakeMLPPolicy
+from cake_drake.learning.policies.mlp.configuration_mlp import CakeMLPConfig
+from cake_drake.learning.policies.mlp.modeling_mlp import CakeMLPPolicy
 
 
 def features():
@@ -175,7 +175,7 @@ def test_a_policy_that_sees_reads_no_pose_and_each_cameras_latest_frame():
 
 
 def test_augmentation_moves_the_images_and_not_the_labels():
-    from cake_drake.learning.mlp.network import random_shift
+    from cake_drake.learning.policies.mlp.network import random_shift
 
     images = torch.rand(16, 3, 20, 24)
     torch.manual_seed(0)
@@ -204,7 +204,7 @@ def test_augmentation_moves_the_images_and_not_the_labels():
 
 
 def test_a_policy_that_sees_loads_without_lerobot_as_it_was_trained(tmp_path):
-    from cake_drake.learning.mlp.network import load
+    from cake_drake.learning.policies.mlp.network import load
 
     p = seeing(n_obs_steps=2, vision_keypoints=8)
     p.save_pretrained(tmp_path)
@@ -221,7 +221,7 @@ def test_a_policy_that_sees_loads_without_lerobot_as_it_was_trained(tmp_path):
 
 @pytest.mark.parametrize("n_obs_steps", [1, 2])
 def test_numpy_acting_is_the_networks_arithmetic(tmp_path, n_obs_steps):
-    from cake_drake.learning.mlp.acting import NumpyChunks, load
+    from cake_drake.learning.policies.mlp.acting import NumpyChunks, load
 
     p = policy(n_obs_steps=n_obs_steps, chunk_size=4, n_action_steps=3)
     p.save_pretrained(tmp_path)
@@ -247,7 +247,7 @@ def test_numpy_acting_is_the_networks_arithmetic(tmp_path, n_obs_steps):
 def test_temporal_ensembling_averages_every_live_chunks_prediction_for_the_step(tmp_path):
     """ACT's temporal ensembling: a chunk predicted at every step, the action the mean of
     every chunk still covering this step, weighted exp(-m * i) with i = 0 the oldest."""
-    from cake_drake.learning.mlp.acting import NumpyChunks, load
+    from cake_drake.learning.policies.mlp.acting import NumpyChunks, load
 
     p = policy(n_obs_steps=1, chunk_size=4, n_action_steps=2)
     p.save_pretrained(tmp_path)
@@ -276,7 +276,7 @@ def test_a_run_with_the_shipped_state_policy_imports_no_torch(tmp_path):
     root = Path(__file__).resolve().parent.parent
     code = (
         "import sys\n"
-        "from cake_drake.cli import main_run\n"
+        "from cake_drake.commands.run import main_run\n"
         "code = main_run(['--scenario', sys.argv[1], '--name', 'learned_stack2', '--out', "
         "sys.argv[2], '--quiet'])\n"
         "print(code, 'torch' in sys.modules)\n"

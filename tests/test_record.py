@@ -79,7 +79,7 @@ def recorded(tmp_path_factory):
 @needs_lerobot
 @pytest.mark.slow
 def test_a_recording_is_a_lerobot_dataset_lerobot_reads(recorded):
-    from cake_drake.learning.dataset import read
+    from cake_drake.learning.data.dataset import read
 
     folder, runs = recorded
     assert "2/2 episodes recorded" in runs["1"].stdout, runs["1"].stdout
@@ -115,7 +115,7 @@ def report_task(folder: Path, seed: int) -> str:
 @needs_lerobot
 @pytest.mark.slow
 def test_decoded_frames_match_the_rendered_ones_within_codec_tolerance(recorded):
-    from cake_drake.learning.dataset import read
+    from cake_drake.learning.data.dataset import read
 
     folder, _ = recorded
     report = json.loads((folder / "ds1" / "report.json").read_text())
@@ -151,8 +151,8 @@ def test_skipping_lerobots_image_embedding_writes_the_same_parquet_bytes(recorde
     from lerobot.datasets import dataset_writer
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from cake_drake.learning import dataset
-    from cake_drake.learning.recording import _load
+    from cake_drake.learning.data import dataset
+    from cake_drake.learning.data.recording import load_episode
 
     folder, _ = recorded
     report = json.loads((folder / "ds1" / "report.json").read_text())
@@ -162,7 +162,7 @@ def test_skipping_lerobots_image_embedding_writes_the_same_parquet_bytes(recorde
     def episodes():
         for row in rows:
             npz = folder / "ds1" / "episodes" / f"ep_{row['seed']}.npz"
-            yield _load(npz, row, images=False)
+            yield load_episode(npz, row, images=False)
 
     embedded = []
     real = dataset_writer.embed_images
@@ -233,7 +233,7 @@ def test_resume_records_only_the_rest_and_a_recording_is_not_reused_without_it(r
     after = {p.name: p.stat().st_mtime_ns for p in (folder / "ds1" / "episodes").glob("ep_*")}
     assert all(after[n] == t for n, t in kept.items())  # the first two were not recorded again
     assert len(after) > len(kept)
-    from cake_drake.learning.dataset import read
+    from cake_drake.learning.data.dataset import read
 
     assert read(folder / "ds1").meta.total_episodes == 3
 
@@ -392,7 +392,7 @@ def test_a_recording_rewritten_in_place_with_its_old_times_is_read_anew(recorded
     is read as it is now."""
     import shutil
 
-    from cake_drake.learning.dataset import content_digest, read
+    from cake_drake.learning.data.dataset import content_digest, read
 
     folder, _ = recorded
     ds = tmp_path / "ds"
@@ -420,7 +420,7 @@ def test_a_learning_task_generates_what_its_scenario_says_or_refuses_it():
     """``task.generate.tall`` reaches the episodes (few, tall towers); a generate field the
     episodes cannot follow is one line, not silently dropped."""
     from cake_drake.errors import InputError
-    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.learning.data.recording import spec_from_scenario
     from cake_drake.pipeline import check
     from cake_drake.scenario import Generate, Policy, Scenario
     from cake_drake.symbolic.roles import blocksworld_view

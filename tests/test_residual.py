@@ -17,7 +17,7 @@ import pytest
 
 from cake_drake.dynamic.residual import Kinematics, ResidualModel, samples
 from cake_drake.errors import InputError
-from cake_drake.learning.residual import train_residual
+from cake_drake.learning.training.residual import train_residual
 from cake_drake.pipeline import run
 from cake_drake.scenario import ComputedTorque, Generate, Scenario
 from cake_drake.world.scene import make_control_plant
@@ -71,7 +71,7 @@ def test_a_residual_fitted_on_one_run_cuts_the_error_of_its_held_out_part(tmp_pa
     run(heavy(tmp_path / "run", cube_mass_kg=0.5))
     # A fit that gives no numbers (forced here, as degenerate samples would) is refused
     # in one line and never written.
-    import cake_drake.learning.residual as residual_fit
+    import cake_drake.learning.training.residual as residual_fit
 
     real_fit = residual_fit.fit
     monkeypatch.setattr(residual_fit, "fit", lambda phi, y: real_fit(phi, y) * np.nan)

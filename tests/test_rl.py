@@ -21,7 +21,7 @@ import pytest
 from pydrake.math import RigidTransform
 
 from cake_drake.errors import InputError
-from cake_drake.learning import rewards
+from cake_drake.learning.envs import rewards
 from cake_drake.scenario import Reward
 from cake_drake.world.facts import read_goal
 from cake_drake.world.scene import CUBE_SIZE
@@ -298,7 +298,7 @@ def test_a_trained_folder_acts_in_evaluate_a_run_and_the_gym_env(trained, tmp_pa
     layers = json.loads((tmp_path / "run" / "summary.json").read_text())["layers"]
     assert "imitation + RL residual, PPO" in layers["symbolic"]["what"]
     assert layers["symbolic"]["kind"] == "learned"
-    from cake_drake.learning.checkpoint import make
+    from cake_drake.learning.policies.checkpoint import make
 
     env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
                          control_mode="joint_position")  # fmt: skip
@@ -317,8 +317,8 @@ def _side_by_side(folder: Path, steps: int, edit) -> list[tuple[np.ndarray, np.n
     would execute it."""
     import torch
 
-    from cake_drake.learning.checkpoint import CheckpointPolicy
-    from cake_drake.learning.rl import RlPolicy
+    from cake_drake.learning.policies.lerobot_checkpoint import CheckpointPolicy
+    from cake_drake.learning.policies.rl import RlPolicy
 
     env = gymnasium.make(ENV_ID, problem=str(ROOT / "models/pddl/stack2.pddl"),
                          control_mode="joint_position")  # fmt: skip
@@ -429,7 +429,7 @@ def test_a_residual_for_another_base_is_refused(trained, tmp_path):
 
 
 def test_a_residual_for_another_action_space_is_refused(trained, tmp_path):
-    from cake_drake.learning.checkpoint import check_folder
+    from cake_drake.learning.policies.checkpoint import check_folder
 
     said = "learned in joint_position; the run's action space is ee_delta"
     with pytest.raises(InputError, match=said):
@@ -488,8 +488,8 @@ def test_the_shipped_residual_names_its_base_and_runs_its_scenario(tmp_path):
     """models/policies/stack2_pixels_rl: the pixel policy's residual, checked against its
     base's weights, runs its scenario and says what it is. How it compares with its base
     is a 50-seed table (docs/learning.md: 15/50 against 20/50), not any one seed."""
-    from cake_drake.learning.checkpoint import model_folder
-    from cake_drake.learning.rl import digest, read_rl
+    from cake_drake.learning.policies.lerobot_checkpoint import model_folder
+    from cake_drake.learning.policies.rl import digest, read_rl
 
     shipped = ROOT / "models" / "policies" / "stack2_pixels_rl"
     info = read_rl(shipped)

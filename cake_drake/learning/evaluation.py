@@ -4,7 +4,7 @@
 problem size, steps, time and the reasons episodes ended. A learned skill checkpoint is
 evaluated under the planner: each episode is the same problem and placement run with the
 plan, the execution monitor and the skills as the geometric layer
-(:func:`cake_drake.learning.skills.episode`), and the summary says how often the
+(:func:`cake_drake.learning.policies.skills.episode`), and the summary says how often the
 monitor's repeats and replans rescued an episode.
 """
 
@@ -17,6 +17,7 @@ from dataclasses import asdict
 import numpy as np
 
 from cake_drake.learning.parallel import map_ordered
+from cake_drake.learning.policies.skills import episode as skill_episode
 from cake_drake.learning.rollout import FRAMES, EpisodeSpec, rollout
 from cake_drake.scenario import SKILL_POLICY
 
@@ -38,9 +39,7 @@ def _evaluate_one(args) -> dict:
     (run in a worker)."""
     spec, seed, final = args
     if spec.policy == SKILL_POLICY:  # learned skills under the planner: a run per episode
-        from cake_drake.learning.skills import episode
-
-        return episode(spec, seed)
+        return skill_episode(spec, seed)
     ep = rollout(spec, seed, record=False, final_frame=final)
     row = {k: v for k, v in asdict(ep).items() if k not in FRAMES}
     return {**row, "final": ep.final} if ep.final is not None else row

@@ -12,9 +12,12 @@ several times slower.
 
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass
 
 from cake_drake.errors import CakeDrakeError
+from cake_drake.sweeps.pool import spawn_imap
 
 
 @dataclass
@@ -29,9 +32,6 @@ class _Failed:
 
 def limit_threads(threads: int) -> None:
     """Give torch ``threads`` threads in this process, whether it is imported yet or not."""
-    import os
-    import sys
-
     os.environ["OMP_NUM_THREADS"] = str(threads)  # read when torch is first imported
     if "torch" in sys.modules:
         sys.modules["torch"].set_num_threads(threads)
@@ -64,10 +64,6 @@ def imap(fn, jobs, workers: int, ray=None):
     elif workers <= 1 or len(jobs) <= 1:
         yield from (fn(j) for j in jobs)
     else:
-        import os
-
-        from cake_drake.sweeps.pool import spawn_imap
-
         workers = min(workers, len(jobs))
         threads = max(1, len(os.sched_getaffinity(0)) // workers)
         answers = spawn_imap(_guarded_call, [(fn, j, threads) for j in jobs], workers)

@@ -32,10 +32,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cake_drake.errors import InputError
+from cake_drake.geometric.ik import Kinematics
 from cake_drake.plugins import DURING, guarded
+from cake_drake.policy import spaces
+from cake_drake.policy.observations import NO_GROUND_ACTION, SKILL_SIZE
+from cake_drake.policy.spaces import EE_STEP
 from cake_drake.scenario import ACT_BUDGET_S
+from cake_drake.systems.policy_source import make_policy
 
-#: The policy the recordings use unless another is named: the classical cake as a policy.
+#: The policy the recordings use unless another is named: the classical cake as a policy
+#: (:mod:`cake_drake.learning.policies.expert`, by the path recordings and scenarios name).
 EXPERT = "cake_drake.learning.expert:make"
 #: Who acted at a frame (the dataset's ``actor``): the labelling policy, or a learner.
 EXPERT_ACTED, LEARNER_ACTED = 0, 1
@@ -50,8 +56,6 @@ def noise_scale(control_mode: str) -> np.ndarray:
     """The standard deviation, per action component, of noise of size 1: ``joint_position``
     1 rad on each of the seven joints; ``ee_delta`` 1 m on dx, dy, dz and the rotations
     scaled as their bounds are (0.25 rad per 0.05 m: 5 rad). The gripper is never noised."""
-    from cake_drake.policy.spaces import EE_STEP
-
     if control_mode == "joint_position":
         return np.r_[np.ones(7), 0.0]
     if control_mode == "ee_delta":
@@ -96,7 +100,7 @@ class EpisodeSpec:
     act_budget_s: float = ACT_BUDGET_S  # wall-clock budget of one answer of the policy
 
     def env(self, render_mode: str | None = None):
-        from cake_drake.learning.env import StackEnv
+        from cake_drake.learning.envs.env import StackEnv  # Gymnasium: an optional extra
 
         return StackEnv(
             render_mode=render_mode,
@@ -167,15 +171,11 @@ class Episode:
 
 
 def _make_policy(spec: str, options: dict):
-    from cake_drake.systems.policy_source import make_policy
-
     return make_policy(spec, options)
 
 
 def _answer(policy, label: str, obs, spec: EpisodeSpec, kin, counts):
     """``policy``'s answer to ``obs``: (its action checked and clipped, or None; done)."""
-    from cake_drake.policy import spaces
-
     answer = guarded(label, policy.act, obs, exit_code=DURING, budget_s=spec.act_budget_s)
     action, done = spaces.read_answer(answer, label)
     if action is not None:
@@ -196,9 +196,6 @@ def rollout(
     """Run the policy ``spec.policy`` for one episode of ``spec.env()`` reset with ``seed``;
     with a ``teacher``, label every step with its answer (see the module); with
     ``final_frame``, a failed episode keeps a picture of how it ended."""
-    from cake_drake.geometric.ik import Kinematics
-    from cake_drake.policy import spaces
-
     env = spec.env("rgb_array" if final_frame else None)
     t0 = time.perf_counter()
     obs, info = env.reset(seed=seed)
@@ -281,8 +278,6 @@ def rollout(
 def _skill_observation(policy) -> tuple[np.ndarray, np.ndarray]:
     """The ground action ``policy`` was executing at its last answer, as a skill reads it
     (the closed-loop expert says; any other policy: none)."""
-    from cake_drake.policy.observations import NO_GROUND_ACTION, SKILL_SIZE
-
     said = getattr(policy, "skill_observation", None)
     if said is None:
         return np.zeros(SKILL_SIZE, np.float32), NO_GROUND_ACTION.copy()

@@ -37,6 +37,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from cake_drake.policy.observations import GOAL_START
+
 #: lerobot's own per-frame columns, always handed out.
 INDEX_KEYS = ("timestamp", "frame_index", "episode_index", "index", "task_index")
 #: A learned skill's input, and the column that says which ground action a frame is in.
@@ -64,7 +66,7 @@ def _segments(index: np.ndarray, episode: np.ndarray, ground: np.ndarray):
 def decode_all(path: Path) -> np.ndarray:
     """Every frame of the video at ``path``, in order, as uint8 (frames, H, W, 3): PyAV's
     own FFmpeg, as LeRobot's ``pyav`` backend decodes it."""
-    import av
+    import av  # PyAV (lerobot's, with FFmpeg): only where a video is decoded
 
     with av.open(str(path)) as container:
         stream = container.streams.video[0]
@@ -95,7 +97,7 @@ def _column(table, key: str) -> np.ndarray:
     """Column ``key`` of an Arrow table as one NumPy array, read column-wise: (rows,) for
     a number, (rows, n) for a list of n. (The datasets library's own column reads format
     it row by row: about a second per 10,000 rows.)"""
-    import pyarrow as pa
+    import pyarrow as pa  # a third of a second: only where a column is read
 
     column = table.column(key).combine_chunks()
     if (
@@ -149,8 +151,6 @@ class ColumnDataset(torch.utils.data.Dataset):
         if wanted is not None and SKILL in wanted and SKILL_COLUMN in self.columns:
             self._derived_input(meta, SKILL, self.columns.pop(SKILL_COLUMN))
         if wanted is not None and GOAL in wanted and ENV_STATE in self.columns:
-            from cake_drake.policy.observations import GOAL_START
-
             self._derived_input(meta, GOAL, self.columns[ENV_STATE][:, GOAL_START:])
         self._tasks = [str(name) for name in meta.tasks.index]
         self.frames: dict[str, np.ndarray] = {}
@@ -263,7 +263,7 @@ def fast_batches(keys: Iterable[str] | None):
     forward, backward, optimiser) and ``checkpoint`` (its ``save_checkpoint``); the
     caller adds ``train``, the whole of LeRobot's loop (the rest of it is LeRobot's set-up
     and logging)."""
-    import lerobot.scripts.lerobot_train as lerobot_train
+    import lerobot.scripts.lerobot_train as lerobot_train  # LeRobot's loop: seconds, an extra
 
     keys = None if keys is None else list(keys)
     phases = dict.fromkeys(("loading", "batches", "network", "checkpoint"), 0.0)

@@ -24,12 +24,14 @@ Hugging Face hub set offline.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import sys
 import tempfile
 import warnings
 from collections.abc import Iterable
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
@@ -67,7 +69,7 @@ GROUND_NAMES = ["schema", "cube", "other", "plan_position"]
 #: learned skill reads it (``observation.skill``'s numbers), and by name. Not
 #: ``observation.*`` keys, so LeRobot's own tools (``lerobot-train``) do not take them for
 #: a whole-task policy's inputs; ``train --inputs skill`` reads ``skill`` as
-#: ``observation.skill`` (cake_drake.learning.batches).
+#: ``observation.skill`` (cake_drake.learning.data.batches).
 SKILL = "skill"
 GROUND_ACTION = "ground_action"
 ACTION_NAMES = {
@@ -103,8 +105,6 @@ def require_lerobot() -> None:
             f"which needs Python 3.12 or newer; this is Python {sys.version.split()[0]}: "
             "make test makes a .venv with a newer Python where one is found"
         )
-    from importlib.metadata import PackageNotFoundError, version
-
     try:
         found = version("lerobot")
     except PackageNotFoundError:
@@ -181,7 +181,7 @@ def write(root: Path, episodes: Iterable, fps: float, control_mode: str, cameras
     """Write ``episodes`` (:class:`cake_drake.learning.rollout.Episode`, with frames) as a new
     dataset at ``root`` (which must not exist); the number of frames written."""
     require_lerobot()
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # lerobot: seconds, an extra
 
     with _quiet(), _no_image_embedding():
         return _write(LeRobotDataset, root, episodes, fps, control_mode, cameras)
@@ -194,7 +194,7 @@ def _no_image_embedding():
     and video: the step is skipped while we write (half the writer's time), and LeRobot's
     writer is otherwise unchanged: the same tables and features, less the map's cache
     fingerprint in the schema's metadata (tests/test_record.py checks it)."""
-    from lerobot.datasets import dataset_writer
+    from lerobot.datasets import dataset_writer  # lerobot: seconds, an extra
 
     embed = dataset_writer.embed_images
     dataset_writer.embed_images = lambda dataset: dataset
@@ -205,7 +205,7 @@ def _no_image_embedding():
 
 
 def _write(LeRobotDataset, root, episodes, fps, control_mode, cameras) -> int:  # noqa: N803
-    from lerobot.configs.video import RGBEncoderConfig
+    from lerobot.configs.video import RGBEncoderConfig  # lerobot: seconds, an extra
 
     dataset = LeRobotDataset.create(
         REPO_ID,
@@ -300,7 +300,7 @@ def check_recording(root: Path) -> dict:
     (:func:`read_info`), every table's footer reads (a truncated file is named), the
     action column is as wide as ``info.json`` says, and every video opens with a video
     stream and all its packets. Its ``info``."""
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # a third of a second: only where tables are read
 
     root = Path(root)
     if not root.is_dir():
@@ -342,7 +342,7 @@ def check_recording(root: Path) -> dict:
 
 def _check_video(path: Path) -> None:
     """A video opens, has a video stream, and every packet it says it holds is there."""
-    import av
+    import av  # PyAV (lerobot's, with FFmpeg): only where a video is read
 
     try:
         with av.open(str(path)) as container:
@@ -360,8 +360,6 @@ def _check_video(path: Path) -> None:
 def content_digest(root: Path) -> str:
     """A digest of a recording's tables' bytes (names and contents): what its cached
     Arrow copy is keyed on, so a file rewritten in place, times kept, is read anew."""
-    import hashlib
-
     h = hashlib.sha256()
     root = Path(root)
     for path in sorted((root / "data").glob("chunk-*/file-*.parquet")) + sorted(
@@ -382,7 +380,7 @@ def local_recording(root: Path):
     time). Yields the checked ``info``."""
     require_lerobot()
     info = check_recording(root)
-    import datasets.config
+    import datasets.config  # Hugging Face datasets (lerobot's): seconds, an extra
 
     _offline()
     before = datasets.config.HF_DATASETS_CACHE
@@ -398,7 +396,7 @@ def missing_files(root: Path) -> list[str]:
     ``meta/info.json``, the episode tables, and every data and video file they point to.
     lerobot would fetch a missing one from the hub; a dataset here is read from its
     folder alone."""
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # a third of a second: only where tables are read
 
     root = Path(root)
     info_path = root / "meta" / "info.json"
@@ -440,7 +438,7 @@ def read(root: Path):
     """The dataset at ``root``, as lerobot reads it (decoding videos with PyAV), from its
     folder alone: a file it lacks is named (exit 2), never fetched."""
     with local_recording(root):
-        from lerobot.datasets.lerobot_dataset import LeRobotDataset
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset  # lerobot: seconds
 
         with _quiet():
             return LeRobotDataset(REPO_ID, root=root, video_backend="pyav")

@@ -5,7 +5,7 @@
 offsets from the measured ones), ``n_action_steps`` of them served before the next
 chunk. A policy that sees reads each camera's latest frame through a small encoder of
 its own (:class:`Vision`), whose keypoints join the numbers the perceptron reads.
-LeRobot's wrapper (:class:`cake_drake.learning.mlp.modeling_mlp.CakeMLPPolicy`)
+LeRobot's wrapper (:class:`cake_drake.learning.policies.mlp.modeling_mlp.CakeMLPPolicy`)
 trains it through LeRobot's loop; :func:`load` builds the same network from a checkpoint
 folder (its ``config.json`` and ``model.safetensors``, the same weights under the same
 names) for a run or an evaluation to act with, without importing LeRobot's policies
@@ -22,7 +22,7 @@ from types import SimpleNamespace
 import torch
 from torch import Tensor, nn
 
-from cake_drake.learning.mlp.features import (
+from cake_drake.learning.policies.mlp.features import (
     ACTION,
     ARM,
     EXTRA_INPUTS,
@@ -85,7 +85,7 @@ def _stats(stats: dict | None, key: str, size: int, floor: float) -> tuple[Tenso
 
 class Chunks:
     """The policy's arithmetic, mixed into an ``nn.Module`` with a ``config`` (the fields
-    of :class:`cake_drake.learning.mlp.CakeMLPConfig`)."""
+    of :class:`cake_drake.learning.policies.mlp.configuration_mlp.CakeMLPConfig`)."""
 
     def build(
         self, config, inputs: dict[str, int], action_dim: int, stats=None, cameras=None
@@ -210,7 +210,7 @@ class CakeMLPNetwork(Chunks, nn.Module):
 
 def load(folder: Path, device: str = "cpu") -> CakeMLPNetwork:
     """The ``cake_mlp`` checkpoint in ``folder`` as a :class:`CakeMLPNetwork`."""
-    from safetensors.torch import load_file
+    from safetensors.torch import load_file  # safetensors: the lerobot extra's
 
     folder = Path(folder)
     data = json.loads((folder / "config.json").read_text())

@@ -4,15 +4,15 @@
 :class:`cake_drake.scenario.Training` of the recording's task, or flags) and calls
 lerobot's ``train`` - its sampler, processors, optimiser, progress bar and checkpoints -
 over batches gathered from the recording's columns in memory
-(:mod:`cake_drake.learning.batches`: the same samples as LeRobot's dataset, read once).
+(:mod:`cake_drake.learning.data.batches`: the same samples as LeRobot's dataset, read once).
 Nothing is fetched: the dataset is read from its folder, the hub is off, and vision
 backbones start from scratch unless a weights file is named. The checkpoint is LeRobot's
 layout (``OUT/checkpoints/last/pretrained_model``), which ``evaluate``, a run's
 ``!Policy {checkpoint: OUT}`` and the Gym env load through
-:mod:`cake_drake.learning.checkpoint`. ``resume`` continues ``OUT``'s last checkpoint;
+:mod:`cake_drake.learning.policies.checkpoint`. ``resume`` continues ``OUT``'s last checkpoint;
 ``pretrained`` starts from another's weights (lerobot's ``policy.pretrained_path``: a
 fine-tune, with the new dataset's normalisation), as DAgger's rounds do
-(:mod:`cake_drake.learning.dagger`).
+(:mod:`cake_drake.learning.training.dagger`).
 
 What a policy reads (``inputs``): ``state`` is ``observation.state`` and
 ``observation.environment_state`` (the cubes' poses and the goal), ``images`` the cameras
@@ -30,6 +30,8 @@ import json
 import os
 import sys
 import time
+import types
+import typing
 import warnings
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -37,11 +39,13 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
-from cake_drake.learning import dataset as datasets
+from cake_drake.learning.data import dataset as datasets
+from cake_drake.learning.policies.lerobot_checkpoint import device_for
+from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, GOAL_START
 from cake_drake.scenario import ImageRecipe, PolicyRecipe, Training
 
 #: ``mlp`` is the project's own state policy, registered with LeRobot as ``cake_mlp``
-#: (:mod:`cake_drake.learning.mlp`); the others are LeRobot's.
+#: (:mod:`cake_drake.learning.policies.mlp`); the others are LeRobot's.
 POLICIES = ("act", "diffusion", "mlp")
 INPUTS = ("state", "images", "both", "skill")
 #: What the output folder holds (nothing else is written there).
@@ -50,9 +54,6 @@ TRAIN_OUTPUTS = ("checkpoints", "train.json")
 
 def _fits(value, kind) -> bool:
     """Whether ``value`` (read from JSON) is of the dataclass field type ``kind``."""
-    import types
-    import typing
-
     origin = typing.get_origin(kind)
     if origin in (typing.Union, types.UnionType):
         return any(_fits(value, k) for k in typing.get_args(kind))
@@ -70,8 +71,6 @@ def _fits(value, kind) -> bool:
 
 def _recipe_part(kind, values: dict, where: str):
     """``kind(**values)`` for the fields ``kind`` has, each checked for its type."""
-    import typing
-
     hints = typing.get_type_hints(kind)
     known = {k: v for k, v in values.items() if k in hints}
     for k, v in known.items():
@@ -172,7 +171,7 @@ def input_keys(
 
 
 def in_memory_bytes(info: dict, keys: list[str]) -> int:
-    """What the data path holds for ``keys`` (:mod:`cake_drake.learning.batches`): every
+    """What the data path holds for ``keys`` (:mod:`cake_drake.learning.data.batches`): every
     numeric column, and each camera read, every frame as uint8."""
     frames = int(info.get("total_frames", 0))
     total = 0
@@ -220,8 +219,6 @@ def check(
 ) -> list[str]:
     """Everything refused before training starts: the dataset's files and features, the
     recipe, the device, the output folder. The input features to train on."""
-    from cake_drake.learning.checkpoint import device_for
-
     root, out = Path(root), Path(out)
     device_for(device)
     datasets.check_recording(root)  # every file there and readable: nothing is fetched
@@ -289,7 +286,7 @@ def _policy_config(recipe: Training, device: str, weights: str | None):
     """lerobot's config of the recipe's policy (sizes from the recipe; nothing pretrained
     unless ``weights`` names a file)."""
     if recipe.policy == "act":
-        from lerobot.policies.act.configuration_act import ACTConfig
+        from lerobot.policies.act.configuration_act import ACTConfig  # lerobot: seconds
 
         return ACTConfig(
             device=device,
@@ -306,7 +303,8 @@ def _policy_config(recipe: Training, device: str, weights: str | None):
             optimizer_lr_backbone=recipe.lr,
         )
     if recipe.policy == "mlp":
-        from cake_drake.learning.mlp.configuration_mlp import CakeMLPConfig
+        # LeRobot's configuration classes underneath: seconds, the lerobot extra.
+        from cake_drake.learning.policies.mlp.configuration_mlp import CakeMLPConfig
 
         return CakeMLPConfig(
             device=device,
@@ -319,7 +317,7 @@ def _policy_config(recipe: Training, device: str, weights: str | None):
             optimizer_lr=recipe.lr,
             scheduler_decay_steps=recipe.steps,
         )
-    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig
+    from lerobot.policies.diffusion.configuration_diffusion import DiffusionConfig  # seconds
 
     horizon = max(8, 1 << (recipe.chunk_size - 1).bit_length())  # the U-Net halves it
     return DiffusionConfig(
@@ -364,36 +362,36 @@ def train(
     datasets.require_lerobot()
     keys = check(root, out, recipe, device, resume)
     # Everything LeRobot reads of the recording: checked, offline, its Arrow cache keyed
-    # on content (cake_drake.learning.dataset.local_recording).
+    # on content (cake_drake.learning.data.dataset.local_recording).
     with datasets.local_recording(root):
         return _train(root, out, recipe, keys, device, seed, resume, weights, repo_id,
                       pretrained)  # fmt: skip
 
 
 def _train(root, out, recipe, keys, device, seed, resume, weights, repo_id, pretrained) -> Path:
-    from cake_drake.learning.checkpoint import device_for
-
     os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
     # The datasets library warns at each table it opens that its progress bars stay off,
-    # which the environment asks for (cake_drake.learning.dataset.require_lerobot).
+    # which the environment asks for (cake_drake.learning.data.dataset.require_lerobot).
     warnings.filterwarnings("ignore", message="Cannot enable progress bars")
+    # LeRobot and torch (seconds, the lerobot extra), and what imports them, only to train.
     from lerobot.configs.default import DatasetConfig
     from lerobot.configs.train import TrainPipelineConfig
+    from lerobot.configs.types import FeatureType, PolicyFeature
     from lerobot.datasets.lerobot_dataset import LeRobotDatasetMetadata
     from lerobot.scripts.lerobot_train import train as lerobot_train
     from lerobot.utils.feature_utils import dataset_to_policy_features
 
-    import cake_drake.learning.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
-    from cake_drake.learning.batches import fast_batches
+    import cake_drake.learning.policies.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
+    from cake_drake.learning.data.batches import fast_batches
 
     out = Path(out)
     where = device_for(device)
     cores = len(os.sched_getaffinity(0))
-    # Batches come from the recording's columns in memory (cake_drake.learning.batches),
+    # Batches come from the recording's columns in memory (cake_drake.learning.data.batches),
     # gathered in this process: no loader workers, and the network gets every core but
     # one (two threads on two busy cores ran 4-10x slower than one).
     if where == "cpu":
-        import torch
+        import torch  # loaded already (LeRobot's loop): only to set its threads
 
         torch.set_num_threads(max(1, cores - 1))
     if resume:
@@ -406,14 +404,10 @@ def _train(root, out, recipe, keys, device, seed, resume, weights, repo_id, pret
     else:
         meta = LeRobotDatasetMetadata(repo_id, root=root)
         features = dataset_to_policy_features(meta.features)
-        from lerobot.configs.types import FeatureType, PolicyFeature
-
         if "skill" in meta.features:  # read as observation.skill (learning.batches)
             shape = tuple(meta.features["skill"]["shape"])
             features["observation.skill"] = PolicyFeature(type=FeatureType.STATE, shape=shape)
         if "observation.goal" in keys:  # the goal's part of the environment state
-            from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, GOAL_START
-
             shape = (ENVIRONMENT_STATE_SIZE - GOAL_START,)
             features["observation.goal"] = PolicyFeature(type=FeatureType.STATE, shape=shape)
         policy = _policy_config(recipe, where, weights)

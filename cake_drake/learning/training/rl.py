@@ -4,42 +4,24 @@ Stable-Baselines3's PPO (or SAC) trains on ``CakeDrake/Stack-v0`` with the task'
 episodes (problem, placement, cameras, step budget), its observation and action spaces
 untouched underneath, on the CPU, through Gymnasium's vectorised environments. The
 recipe is the task's ``training.rl`` (:class:`cake_drake.scenario.RlRecipe`), the reward
-its ``reward`` (:mod:`cake_drake.learning.rewards`).
-
-What the learner reads and what its answer means (:class:`LearnerEnv`):
-
-- it reads one vector: the Gym env's ``state`` (22) and ``environment_state`` (240: the
-  cubes' poses and the goal), and, for a residual, the base policy's action;
-- it answers with numbers from -1 to 1, one per number of the action, scaled by the
-  recipe's bound and added to a base action:
-
-  - **a residual** (``base``: a frozen policy's checkpoint, ResiP's recipe): the base
-    acts from its own inputs (its cameras too) and the learner adds at most
-    ``residual_scale`` to each joint target (rad; ``ee_delta``: to each motion of the
-    hand) and ``residual_gripper`` to the gripper's command. The learner's last layer
-    starts at zero: before training, the residual changes nothing.
-  - **from scratch** (no base): the base is "hold still" (``joint_position``: the
-    joints as measured, a joint-delta action; ``ee_delta``: no motion), the bound the
-    same, and the gripper's command the learner's own, over its whole range.
+its ``reward`` (:mod:`cake_drake.learning.envs.rewards`). What the learner reads and
+what its answer means (:class:`LearnerEnv`), a residual over a frozen base or a policy
+from scratch, is :mod:`cake_drake.learning.policies.rl`'s.
 
 The folder ``DIR`` gets ``model.zip`` (Stable-Baselines3's), ``rl.json`` (what it is:
 algorithm, action space, the bound, the base and its weights' digest, the reward, the
 training's figures), ``progress.csv`` (one row an episode) and ``curve.png`` (success and
-return against environment steps). :func:`read_rl` is its one checked reader;
-:class:`RlPolicy` runs it wherever a checkpoint runs (``evaluate DIR``, a run's
-``!Policy {checkpoint: DIR}``, the Gym env's policy plug-in), through
-:mod:`cake_drake.learning.checkpoint`.
+return against environment steps); :mod:`cake_drake.learning.policies.rl` reads it back
+and runs it wherever a checkpoint runs.
 """
 
 from __future__ import annotations
 
 import csv
-import hashlib
 import math
 import time
-import zipfile
 from dataclasses import asdict, replace
-from functools import lru_cache, partial
+from functools import partial
 from pathlib import Path
 
 import gymnasium
@@ -47,77 +29,44 @@ import numpy as np
 from gymnasium import spaces as gs
 
 from cake_drake.errors import InputError
-from cake_drake.formats import read_json_mapping
-from cake_drake.learning.rewards import check_reward
-from cake_drake.scenario import RlRecipe
+from cake_drake.learning.data.recording import spec_from_scenario
+from cake_drake.learning.envs.env import StackEnv
+from cake_drake.learning.envs.rewards import check_reward
+from cake_drake.learning.policies.lerobot_checkpoint import (
+    CheckpointPolicy,
+    camera_features,
+    check_folder,
+    read_checkpoint,
+)
+from cake_drake.learning.policies.rl import (
+    ALGORITHMS,
+    CURVE,
+    FILE,
+    FILES,
+    FORMAT,
+    KIND_LABELS,
+    MODEL,
+    OBSERVATION_SIZE,
+    PROGRESS,
+    SPACES,
+    Composer,
+    digest,
+    observation_vector,
+)
+from cake_drake.scenario import Policy, RlRecipe, portable_path, resolve_path
 
-FILE = "rl.json"
-MODEL = "model.zip"
-PROGRESS = "progress.csv"
-CURVE = "curve.png"
-FILES = (FILE, MODEL, PROGRESS, CURVE)
-ALGORITHMS = ("ppo", "sac")
-#: The action spaces a learner answers in (a chunk is not learned from a reward).
-SPACES = ("joint_position", "ee_delta")
-#: What the learner reads besides a base's action: state (22) and environment_state (240).
-OBSERVATION_SIZE = 22 + 240
-FORMAT = 1
-#: The layer's label in a run's ``layers`` and the tables.
-KIND_LABELS = {"residual": "imitation + RL residual", "scratch": "RL from scratch"}
-
-
-# --- what the learner reads and what its answer does ----------------------------------------
-
-
-def observation_vector(observation) -> np.ndarray:
-    """The learner's input from a Gym observation (``state``, ``environment_state``) or
-    the policy slot's (``observation.*``): 262 float32 numbers."""
-    if "observation.state" in observation:
-        parts = [observation[k] for k in ("observation.state", "observation.velocity",
-                                          "observation.ee_pose",
-                                          "observation.environment_state")]  # fmt: skip
-    else:
-        parts = [observation["state"], observation["environment_state"]]
-    return np.concatenate([np.asarray(p, np.float32).ravel() for p in parts])
-
-
-def _joints(observation) -> np.ndarray:
-    if "observation.state" in observation:
-        return np.asarray(observation["observation.state"], np.float64)[:7]
-    return np.asarray(observation["state"], np.float64)[:7]
-
-
-class Composer:
-    """A learner's answer (-1 to 1 a number) as an action of ``space``: added to the
-    base's action within ``bound``, or (no base) to "hold still"."""
-
-    def __init__(self, space: str, scale: float, gripper: float, residual: bool, low, high):
-        self.space, self.residual = space, residual
-        self.low, self.high = np.asarray(low, np.float64), np.asarray(high, np.float64)
-        size = len(self.low)
-        self.bound = np.r_[np.full(size - 1, scale), gripper]
-
-    def action(self, answer, observation, base_action=None) -> np.ndarray:
-        a = np.clip(np.asarray(answer, np.float64), -1.0, 1.0)
-        if self.residual:
-            out = np.asarray(base_action, np.float64) + self.bound * a
-        else:
-            hold = _joints(observation) if self.space == "joint_position" else np.zeros(6)
-            gripper = self.low[-1] + (a[-1] + 1.0) / 2.0 * (self.high[-1] - self.low[-1])
-            out = np.r_[hold + self.bound[:-1] * a[:-1], gripper]
-        return np.clip(out, self.low, self.high)
+# --- the learner's environment -------------------------------------------------------------
 
 
 class LearnerEnv(gymnasium.Wrapper):
-    """``CakeDrake/Stack-v0`` as the learner sees it: see the module's docstring."""
+    """``CakeDrake/Stack-v0`` as the learner sees it: one vector in, an answer from -1 to 1
+    out, composed with the base's action (:mod:`cake_drake.learning.policies.rl`)."""
 
     def __init__(self, env, recipe: RlRecipe, base: str = "") -> None:
         super().__init__(env)
         inner = env.unwrapped
         self.base = None
         if base:
-            from cake_drake.learning.checkpoint import CheckpointPolicy
-
             self.base = CheckpointPolicy(base, "cpu")
         low, high = inner.action_space.low, inner.action_space.high
         self.composer = Composer(
@@ -153,9 +102,7 @@ class LearnerEnv(gymnasium.Wrapper):
 def learner_env(spec, recipe: RlRecipe, base: str = ""):
     """The learner's environment of an episode spec (a module-level factory: it is
     pickled into each of the vectorised environments' processes)."""
-    from stable_baselines3.common.monitor import Monitor
-
-    from cake_drake.learning.env import StackEnv
+    from stable_baselines3.common.monitor import Monitor  # SB3 imports torch: seconds
 
     env = StackEnv(
         blocks=spec.blocks, problem=spec.problem,
@@ -221,15 +168,6 @@ def check_recipe(recipe: RlRecipe) -> RlRecipe:
     return replace(recipe, reward=check_reward(recipe.reward, f"{w}.reward"))
 
 
-def digest(folder: Path) -> str:
-    """The SHA-256 of a checkpoint's weights: what a residual names its base by."""
-    h = hashlib.sha256()
-    with open(Path(folder) / "model.safetensors", "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 class Progress:
     """One row an episode (steps so far, return, length, success), a line every rollout,
     and the figures the folder's ``rl.json`` keeps. A Stable-Baselines3 callback is made
@@ -268,7 +206,7 @@ class Progress:
 
 
 def _callback(progress: Progress, every: int):
-    from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.callbacks import BaseCallback  # SB3 imports torch: seconds
 
     class Callback(BaseCallback):
         def _on_step(self) -> bool:
@@ -286,7 +224,7 @@ def _callback(progress: Progress, every: int):
 def draw_curve(rows: list[dict], path: Path, title: str, window: int = 50) -> None:
     """Success (over the last ``window`` episodes, drawn from the tenth on) and return
     against environment steps."""
-    import matplotlib
+    import matplotlib  # its pyplot: a second's import, only for the figure
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -317,7 +255,7 @@ def draw_curve(rows: list[dict], path: Path, title: str, window: int = 50) -> No
 
 
 def _model(recipe: RlRecipe, venv, seed: int, residual: bool):
-    import torch
+    import torch  # torch and Stable-Baselines3 below: seconds, only where a model is made
 
     policy_kwargs = {"net_arch": list(recipe.hidden_dims)}
     if recipe.algorithm == "ppo":
@@ -355,10 +293,7 @@ def _model(recipe: RlRecipe, venv, seed: int, residual: bool):
 def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=print) -> dict:
     """Train ``recipe`` on ``scenario``'s episodes into the staged folder ``out``
     (:class:`cake_drake.outputs.files.OutputDir`); what ``rl.json`` says of it."""
-    import torch
-
-    from cake_drake.learning.recording import spec_from_scenario
-    from cake_drake.scenario import Policy, portable_path, resolve_path
+    import torch  # torch and Stable-Baselines3 below: seconds, only where one trains
 
     recipe = check_recipe(recipe)
     if not isinstance(scenario.reference, Policy):
@@ -370,8 +305,6 @@ def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=pri
                          f"{' or '.join(SPACES)}")  # fmt: skip
     base, base_info = "", None
     if recipe.base:
-        from cake_drake.learning.checkpoint import camera_features, check_folder, read_checkpoint
-
         base_path = resolve_path(recipe.base)
         folder = check_folder(base_path, spec.control_mode, "cpu", spec.cameras)
         if (base_path / FILE).is_file():
@@ -442,204 +375,4 @@ def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=pri
     return info
 
 
-# --- the folder, read back --------------------------------------------------------------
-
-
-def is_rl(path) -> bool:
-    """Whether ``path`` is an RL training's folder (it holds ``rl.json``)."""
-    return (Path(path) / FILE).is_file()
-
-
-def read_rl(folder) -> dict:
-    """The one checked reader of an RL folder: ``rl.json`` checked against itself and
-    against ``model.zip`` (a Stable-Baselines3 archive); one line naming the file and
-    the field otherwise. A residual's base is checked where it runs (:func:`check_folder`)."""
-    folder = Path(folder)
-    path = folder / FILE
-    info = read_json_mapping(path, "an RL checkpoint's description")
-    if info.get("format") != FORMAT:
-        raise InputError(f"{path}: field 'format' is {info.get('format')!r}; this version "
-                         f"reads {FORMAT}")  # fmt: skip
-    want = {
-        "kind": lambda v: v in KIND_LABELS,
-        "algorithm": lambda v: v in ALGORITHMS,
-        "action_space": lambda v: v in SPACES,
-        "observation_size": lambda v: isinstance(v, int) and v >= OBSERVATION_SIZE,
-        "action_size": lambda v: isinstance(v, int) and 2 <= v <= 8,
-        "residual_scale": lambda v: isinstance(v, int | float) and 0 < v <= 1,
-        "residual_gripper": lambda v: isinstance(v, int | float) and 0 <= v <= 0.08,
-    }
-    for name, ok in want.items():
-        if name not in info or isinstance(info[name], bool) or not ok(info[name]):
-            raise InputError(f"{path}: field {name!r} is {info.get(name)!r:.40}, not valid")
-    residual = info["kind"] == "residual"
-    if info["observation_size"] != OBSERVATION_SIZE + (info["action_size"] if residual else 0):
-        raise InputError(f"{path}: observation_size {info['observation_size']} does not fit "
-                         f"a {info['kind']} over {info['action_size']} actions")  # fmt: skip
-    base = info.get("base")
-    if residual and not (
-        isinstance(base, dict) and isinstance(base.get("path"), str)
-        and isinstance(base.get("sha256"), str)
-    ):  # fmt: skip
-        raise InputError(f"{path}: a residual names its base (field 'base': path and sha256)")
-    model = folder / MODEL
-    try:
-        with zipfile.ZipFile(model) as z:
-            names = set(z.namelist())
-    except (OSError, zipfile.BadZipFile) as e:
-        raise InputError(f"{model}: not a readable Stable-Baselines3 archive ({e})") from None
-    if not {"data", "policy.pth"} <= names:
-        raise InputError(f"{model}: not a Stable-Baselines3 archive (no data and policy.pth)")
-    return info
-
-
-def check_weights(folder, info: dict) -> None:
-    """Refuse ``model.zip`` whose network cannot act as ``rl.json`` says, before any
-    episode: weights that Stable-Baselines3's own loader cannot read (the network by
-    PyTorch's ``weights_only`` load), no policy, spaces of other sizes, or values that
-    are not finite. Remembered by the file's bytes."""
-    model = Path(folder) / MODEL
-    h = hashlib.sha256()
-    with open(model, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    _checked_weights(str(model), h.hexdigest(), info["observation_size"], info["action_size"])
-
-
-@lru_cache(maxsize=8)
-def _checked_weights(model: str, sha256: str, observation_size: int, action_size: int) -> None:
-    del sha256  # the cache's key: the same bytes are the same weights
-    from stable_baselines3.common.save_util import load_from_zip_file
-
-    try:
-        data, params, _ = load_from_zip_file(model, device="cpu", print_system_info=False)
-    except Exception as e:  # noqa: BLE001 - a user's file: any failure to read it is bad input
-        first = (str(e).strip().splitlines() or [""])[0][:160]
-        raise InputError(f"{model}: its weights cannot be read ({type(e).__name__}: "
-                         f"{first})") from None  # fmt: skip
-    policy = (params or {}).get("policy")
-    if not isinstance(policy, dict) or not policy:
-        raise InputError(f"{model}: holds no policy network (policy.pth)")
-    spaces_said = {
-        "observation_space": (observation_size,),
-        "action_space": (action_size,),
-    }
-    for name, shape in spaces_said.items():
-        got = getattr((data or {}).get(name), "shape", None)
-        if got != shape:
-            raise InputError(f"{model}: its {name} is {got}, where {FILE} says {shape}")
-    for key, tensor in policy.items():
-        values = getattr(tensor, "detach", None)
-        if values is None:
-            raise InputError(f"{model}: policy entry {key!r} is not a tensor")
-        if not bool(values().isfinite().all()):
-            raise InputError(f"{model}: policy entry {key!r} holds NaN or infinite values")
-
-
-def check_folder(path, action_space: str, device: str = "auto", cameras=None) -> dict:
-    """Refuse, before anything is built, an RL folder that cannot run here: unreadable,
-    another action space than the run's, a residual whose base is missing or is another
-    policy than the one it was trained on (its weights' digest), a base that sees cameras
-    the run lacks, or a device other than the CPU; ``rl.json``'s contents."""
-    from cake_drake.scenario import resolve_path
-
-    info = read_rl(path)
-    if device not in ("auto", "cpu"):
-        raise InputError(f"{path}: an RL policy acts on the CPU; device {device!r} is not for it")
-    check_weights(path, info)
-    if info["action_space"] != action_space:
-        raise InputError(f"{path}: learned in {info['action_space']}; the run's action space "
-                         f"is {action_space}")  # fmt: skip
-    if info["kind"] == "residual":
-        from cake_drake.learning.checkpoint import check_folder as check_base
-
-        base = resolve_path(info["base"]["path"])
-        if not base.exists():
-            raise InputError(f"{path}: its base {info['base']['path']} is not there")
-        if is_rl(base):
-            raise InputError(f"{path}: its base {base} is an RL folder, not a learned policy")
-        folder = check_base(base, action_space, "cpu", cameras)
-        if digest(folder) != info["base"]["sha256"]:
-            raise InputError(
-                f"{path}: a residual for another base policy (the weights at "
-                f"{info['base']['path']} are not the ones it was trained on)"
-            )
-    return info
-
-
-def base_cameras(path) -> dict:
-    """The cameras an RL folder's policy sees: its base's (none from scratch)."""
-    from cake_drake.learning.checkpoint import _config, camera_features, model_folder
-    from cake_drake.scenario import resolve_path
-
-    info = read_rl(path)
-    if info["kind"] != "residual":
-        return {}
-    return camera_features(_config(model_folder(resolve_path(info["base"]["path"]))))
-
-
-def describe(path) -> str:
-    """The learned layer as a run's ``layers`` names it."""
-    info = read_rl(path)
-    return f"{KIND_LABELS[info['kind']]}, {info['algorithm'].upper()}"
-
-
-class RlPolicy:
-    """An RL folder as a policy plug-in: the base (a residual's) and the learner, acting
-    deterministically (the learner's mean answer)."""
-
-    def __init__(self, path: str, device: str = "auto") -> None:
-        self.path = Path(path)
-        self.info = read_rl(self.path)
-        self._device = device
-        self._model = self.base = None
-
-    def _load(self, task) -> None:
-        from cake_drake.geometric.ik import Kinematics
-        from cake_drake.policy import spaces
-        from cake_drake.scenario import resolve_path
-
-        info = self.info
-        if info["kind"] == "residual":
-            from cake_drake.learning.checkpoint import CheckpointPolicy
-
-            self.base = CheckpointPolicy(str(resolve_path(info["base"]["path"])), "cpu")
-        if info["algorithm"] == "ppo":
-            from stable_baselines3 import PPO as Algorithm
-        else:
-            from stable_baselines3 import SAC as Algorithm
-        self._model = Algorithm.load(self.path / MODEL, device="cpu")
-        shape = self._model.observation_space.shape
-        if shape != (info["observation_size"],) or self._model.action_space.shape != (
-            info["action_size"],
-        ):
-            raise InputError(f"{self.path / MODEL}: its network reads {shape} and answers "
-                             f"{self._model.action_space.shape}, not what {FILE} says")  # fmt: skip
-        kin = Kinematics()
-        low, high = spaces.bounds(info["action_space"], {}, kin.lower, kin.upper)
-        self.composer = Composer(
-            info["action_space"], info["residual_scale"], info["residual_gripper"],
-            self.base is not None, low, high,
-        )  # fmt: skip
-
-    def reset(self, task, seed: int) -> None:
-        space = getattr(task, "action_space", "joint_position")
-        if space != getattr(self, "_checked", None):  # the base's digest: once, not per episode
-            check_folder(self.path, space, self._device)
-            self._checked = space
-        if self._model is None:
-            self._load(task)
-        if self.base is not None:
-            self.base.reset(task, seed)
-
-    def act(self, observation) -> np.ndarray:
-        v = observation_vector(observation)
-        base = None
-        if self.base is not None:
-            base = np.asarray(self.base.act(observation), np.float64)
-            v = np.r_[v, base.astype(np.float32)]
-        answer, _ = self._model.predict(v, deterministic=True)
-        return self.composer.action(answer, observation, base)
-
-
-__all__ = ["RlPolicy", "check_recipe", "read_rl", "train_rl"]
+__all__ = ["FILES", "KIND_LABELS", "LearnerEnv", "check_recipe", "learner_env", "train_rl"]

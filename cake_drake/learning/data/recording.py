@@ -4,7 +4,7 @@
 on seeded problems, each finished episode kept at once in ``OUT/episodes/`` (so an
 interrupted recording keeps what finished and ``resume`` runs only the rest); the
 successful ones then become one LeRobot dataset in ``OUT`` (``meta/``, ``data/``,
-``videos/``: :mod:`cake_drake.learning.dataset`), written in seed order whatever the
+``videos/``: :mod:`cake_drake.learning.data.dataset`), written in seed order whatever the
 workers, and ``OUT/report.json`` says what was recorded and why the others failed.
 
 With ``spec.noise`` (DART) each executed action is the demonstrator's plus seeded noise
@@ -28,6 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError, OutputError
+from cake_drake.formats import MAX_NPZ_ARRAY_BYTES, TEXT, npz_headers, read_npz
+from cake_drake.learning.data import dataset
 from cake_drake.learning.parallel import imap, map_ordered
 from cake_drake.learning.rollout import (
     EXPERT,
@@ -38,7 +40,16 @@ from cake_drake.learning.rollout import (
     replay,
     rollout,
 )
-from cake_drake.scenario import ACT_BUDGET_S
+from cake_drake.outputs.files import check_output_folder, claim_folder
+from cake_drake.policy.observations import GROUND_ACTION_SIZE, NO_GROUND_ACTION, SKILL_SIZE
+from cake_drake.scenario import (
+    ACT_BUDGET_S,
+    Policy,
+    load_scenario,
+    resolve_path,
+    scenario_names,
+)
+from cake_drake.world.cameras import default_cameras
 
 RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 
@@ -46,8 +57,6 @@ RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 def learning_tasks(path) -> list[str]:
     """The names in a scenario file that are learning tasks: a ``!Policy`` whose factory
     demonstrates (the expert), not a run of a trained checkpoint or of the planner."""
-    from cake_drake.scenario import Policy, load_scenario, scenario_names
-
     out = []
     for name in scenario_names(path):
         ref = load_scenario(path, name).reference
@@ -60,9 +69,6 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
     """The episodes a scenario describes: its problem (``task.generate``: that many blocks,
     one problem per seed; ``task.problem``: that one), its cameras (the default two when
     it names none), and its ``!Policy`` (action space, rate, steps, the policy itself)."""
-    from cake_drake.scenario import Policy, resolve_path
-    from cake_drake.world.cameras import default_cameras
-
     s = scenario
     blocks, problem, tall = (3, 8), None, False
     if s.task.generate is not None:
@@ -112,7 +118,7 @@ def _record_one(args) -> Episode:
     return rollout(spec, seed, record=True)
 
 
-def _keep(ep: Episode, folder: Path, failed_too: bool = False) -> dict:
+def keep_episode(ep: Episode, folder: Path, failed_too: bool = False) -> dict:
     """Write a finished episode into ``folder`` (its frames when it succeeded, or always
     with ``failed_too``, whole by rename; its verdict always, last); its row."""
     row = {k: v for k, v in asdict(ep).items() if k not in FRAMES}
@@ -124,11 +130,11 @@ def _keep(ep: Episode, folder: Path, failed_too: bool = False) -> dict:
                      skills=ep.skills, grounds=ep.grounds,
                      **{f"image_{k}": v for k, v in ep.images.items()})  # fmt: skip
         os.replace(tmp, folder / f"ep_{ep.seed}.npz")
-    _write_whole(folder / f"ep_{ep.seed}.json", json.dumps(row) + "\n")
+    write_whole(folder / f"ep_{ep.seed}.json", json.dumps(row) + "\n")
     return row
 
 
-def _write_whole(path: Path, text: str) -> None:
+def write_whole(path: Path, text: str) -> None:
     """Write ``path`` whole or not at all (a temporary file, then a rename)."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}")
     tmp.write_text(text)
@@ -190,9 +196,6 @@ def record(
     """Record ``seeds``' episodes into the dataset at ``out`` (see the module), on a local
     pool of ``workers`` or on ``ray``; each is kept by this process as it finishes. The
     report names the ``task`` and keeps its ``training`` recipe, for ``train``."""
-    from cake_drake.learning import dataset
-    from cake_drake.outputs.files import check_output_folder, claim_folder
-
     dataset.require_lerobot()
     dataset.features(spec.control_mode, spec.cameras)  # a mode that cannot be recorded
     if spec.noise:
@@ -207,11 +210,11 @@ def record(
         _check_resume(cache, spec, out)
     claim_folder(out, "record", RECORD_OUTPUTS)
     cache.mkdir(exist_ok=True)
-    _write_whole(cache / "spec.json", json.dumps(_spec_json(spec)) + "\n")
+    write_whole(cache / "spec.json", json.dumps(_spec_json(spec)) + "\n")
     done = _finished(cache) if resume else {}
     todo = [s for s in seeds if s not in done]
     for ep in imap(_record_one, [(spec, s) for s in todo], workers, ray):
-        row = _keep(ep, cache)
+        row = keep_episode(ep, cache)
         done[ep.seed] = row
     rows = [done[s] for s in seeds]
     kept = [r for r in rows if r["success"] and (cache / f"ep_{r['seed']}.npz").is_file()]
@@ -220,7 +223,7 @@ def record(
     try:
         frames = dataset.write(
             staging / "dataset",
-            (_load(cache / f"ep_{r['seed']}.npz", r) for r in kept),
+            (load_episode(cache / f"ep_{r['seed']}.npz", r) for r in kept),
             spec.rate_hz,
             spec.control_mode,
             spec.cameras,
@@ -255,19 +258,17 @@ def record(
 
 #: What a kept episode is, for messages.
 KEPT = "a kept episode (episodes/ep_SEED.npz, as python -m cake_drake.record keeps it)"
-#: What a kept episode holds (``_keep``); ``N`` the episode's frames.
+#: What a kept episode holds (``keep_episode``); ``N`` the episode's frames.
 EPISODE_ARRAYS = {"states": ("N", None), "environment": ("N", None), "actions": ("N", None),
                   "task": ()}  # fmt: skip
 EPISODE_OPTIONAL = {"actors": ("N",), "executed": ("N", None), "skills": ("N", None),
                     "grounds": ("N", None)}  # fmt: skip
 
 
-def _load(path: Path, row: dict, images: bool = True) -> Episode:
-    """A kept episode (``_keep``'s npz and row), read by the checked reader: every array's
+def load_episode(path: Path, row: dict, images: bool = True) -> Episode:
+    """A kept episode (``keep_episode``'s npz and row), read by the checked reader: every array's
     kind and shape checked, one line naming the file otherwise. One kept before who acted
     was recorded was the demonstrator's alone."""
-    from cake_drake.formats import MAX_NPZ_ARRAY_BYTES, TEXT, npz_headers, read_npz
-
     headers = npz_headers(path, KEPT, MAX_NPZ_ARRAY_BYTES)
     # An episode kept before a field was recorded holds it as None (an object array).
     optional = {k: v for k, v in EPISODE_OPTIONAL.items() if headers.get(k, ((), None))[0]}
@@ -289,8 +290,6 @@ def _load(path: Path, row: dict, images: bool = True) -> Episode:
 
 def _skill_frames(path: Path, z: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
     """An episode's ground actions per frame; none for one kept before they were recorded."""
-    from cake_drake.policy.observations import GROUND_ACTION_SIZE, NO_GROUND_ACTION, SKILL_SIZE
-
     if "skills" in z and z["skills"].shape == (n, SKILL_SIZE):
         if "grounds" not in z or z["grounds"].shape != (n, GROUND_ACTION_SIZE):
             raise InputError(f"{path}: array 'grounds' must have shape ({n}, "
@@ -322,7 +321,9 @@ def _spec_json(spec: EpisodeSpec) -> dict:
     return d
 
 
-def _spec_from_json(d: dict) -> EpisodeSpec:
+def spec_from_json(d: dict) -> EpisodeSpec:
+    """The episodes a recording's ``report.json`` says it ran (its ``spec``), without its
+    cameras: a replay, or DAgger's rollouts, judge from the poses."""
     blocks = tuple(d["blocks"]) if isinstance(d["blocks"], list) else d["blocks"]
     return EpisodeSpec(
         blocks=blocks,
@@ -353,8 +354,6 @@ def _ran(root: Path, seed: int, report: dict) -> np.ndarray:
     path = root / "episodes" / f"ep_{seed}.npz"
     if not path.is_file():
         raise InputError(f"{path}: missing; a noisy recording replays what ran, kept there")
-    from cake_drake.formats import MAX_NPZ_ARRAY_BYTES, read_npz
-
     return read_npz(path, KEPT, {"executed": (None, None)}, file_limit=MAX_NPZ_ARRAY_BYTES)[
         "executed"
     ]
@@ -362,11 +361,9 @@ def _ran(root: Path, seed: int, report: dict) -> np.ndarray:
 
 def replay_check(root: Path, workers: int) -> dict:
     """Replay every episode of the dataset at ``root`` open loop (see the module)."""
-    from cake_drake.learning import dataset
-
     report = dataset.read_report(root, required=True)
     data = dataset.read(root)
-    spec = _spec_from_json(report["spec"])
+    spec = spec_from_json(report["spec"])
     jobs = [
         (spec, seed, _ran(root, seed, report) if spec.noise else dataset.episode_actions(data, k))
         for k, seed in enumerate(report["seeds"])

@@ -23,7 +23,7 @@ simulated seconds) and returns what the policy slot observes.
 - a generated problem whose goal already holds is drawn again (the same seed always
   gives the same problem).
 - reward: the fraction of the goal's facts measured true in the world, or the terms of
-  :mod:`cake_drake.learning.rewards` weighed by ``reward`` (a mapping, term -> weight:
+  :mod:`cake_drake.learning.envs.rewards` weighed by ``reward`` (a mapping, term -> weight:
   ``{"goal": 1.0, "place": 0.5}``; ``info["reward_terms"]`` has every term); ``info`` has
   ``is_success`` (every goal fact true, every stacked cube within 5 mm of the one below),
   the English instruction ``task``, the ``goal`` facts and those ``missing`` (not
@@ -44,18 +44,25 @@ a different number of cubes, so a new Diagram is built per reset.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import fields
 
 import gymnasium
 import numpy as np
 from gymnasium import spaces as gs
 from pydrake.systems.analysis import Simulator
 
+from cake_drake.diagram import build_diagram
 from cake_drake.errors import InputError
-from cake_drake.learning import rewards
+from cake_drake.geometric.ik import Kinematics
+from cake_drake.learning.envs import rewards
+from cake_drake.pipeline import check, plan_and_layout
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import ENVIRONMENT_STATE_SIZE, MAX_CUBES
+from cake_drake.scenario import Generate, Policy, Reward, Scenario
+from cake_drake.symbolic.roles import blocksworld_view
 from cake_drake.world.cameras import Camera, default_cameras
-from cake_drake.world.scene import set_world_parameters
+from cake_drake.world.render import Renderer
+from cake_drake.world.scene import Placement, cube_poses, set_world_parameters
 
 OBS_MODES = ("state", "rgb", "state+rgb")
 STATE_SIZE = 22
@@ -92,8 +99,6 @@ def _blocks(blocks) -> tuple[int, int]:
 
 def _cameras(cameras) -> list[Camera]:
     """Cameras as :class:`Camera`; a mapping of a camera's fields is read as one."""
-    from dataclasses import fields
-
     if cameras is None:
         return default_cameras()
     if not isinstance(cameras, Sequence) or isinstance(cameras, str):
@@ -139,11 +144,6 @@ class StackEnv(gymnasium.Env):
         tall: bool = False,
         reward: Mapping | None = None,
     ) -> None:
-        from cake_drake.geometric.ik import Kinematics
-        from cake_drake.learning.rewards import check_reward
-        from cake_drake.pipeline import check
-        from cake_drake.scenario import Reward
-
         if obs_mode not in OBS_MODES:
             raise InputError(f"obs_mode {obs_mode!r}; choose one of: {', '.join(OBS_MODES)}")
         if render_mode not in (None, "rgb_array"):
@@ -165,9 +165,9 @@ class StackEnv(gymnasium.Env):
         if not isinstance(tall, bool):
             raise InputError(f"tall = {tall!r:.40}: true or false")
         self.tall = tall
-        #: The reward's weights (cake_drake.learning.rewards): the goal's fraction alone
+        #: The reward's weights (cake_drake.learning.envs.rewards): the goal's fraction alone
         #: unless given.
-        self.reward = check_reward(Reward() if reward is None else reward, "reward")
+        self.reward = rewards.check_reward(Reward() if reward is None else reward, "reward")
         self.render_mode = render_mode
         # The same check a scenario gets, before make() returns: field names as a scenario's.
         self._checked_template = check(self._scenario(0, self.blocks[0]), write=False)
@@ -194,9 +194,6 @@ class StackEnv(gymnasium.Env):
     # --- the episode --------------------------------------------------------------------
 
     def _scenario(self, seed: int, blocks: int | None = None):
-        from cake_drake.scenario import Generate, Policy, Scenario
-        from cake_drake.world.scene import Placement
-
         s = Scenario()
         if self.problem is None:
             if blocks is None:
@@ -205,7 +202,7 @@ class StackEnv(gymnasium.Env):
         else:
             s.task.problem = self.problem
         s.reference = Policy(
-            factory="cake_drake.learning.env:HeldAction",
+            factory="cake_drake.learning.envs.env:HeldAction",
             action_space=self.control_mode,
             rate_hz=self.rate_hz,
             max_steps=1_000_000,  # the environment keeps the budget (``step``)
@@ -227,9 +224,6 @@ class StackEnv(gymnasium.Env):
     def _draw(self):
         """This episode's scenario (problem, placement, seed) and its check, drawn from the
         env's random stream: a generated goal that already holds is no episode."""
-        from cake_drake.pipeline import check
-        from cake_drake.symbolic.roles import blocksworld_view
-
         episode_seed = int(self.np_random.integers(0, 2**31 - 1))
         for _ in range(100):
             scenario = self._scenario(episode_seed)
@@ -248,10 +242,6 @@ class StackEnv(gymnasium.Env):
         return self._draw()[0]
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
-        from cake_drake.diagram import build_diagram
-        from cake_drake.pipeline import plan_and_layout
-        from cake_drake.symbolic.roles import blocksworld_view
-
         super().reset(seed=seed)
         scenario, checked = self._draw()
         view = blocksworld_view(checked.problem)
@@ -300,9 +290,6 @@ class StackEnv(gymnasium.Env):
     def render(self):
         if self.render_mode != "rgb_array" or self._simulator is None:
             return None
-        from cake_drake.world.render import Renderer
-        from cake_drake.world.scene import cube_poses
-
         scene = self._cake.scene
         plant_context = scene.plant.GetMyContextFromRoot(self._context)
         q = scene.plant.GetPositions(plant_context, scene.arm)

@@ -2,15 +2,15 @@
 
 Imitation learning goes wrong on the states a learner drifts into, where no demonstration
 went (Ross et al. 2011). :func:`dagger` first trains the recipe on the recording (behaviour
-cloning, :func:`cake_drake.learning.train.train`), then, each round:
+cloning, :func:`cake_drake.learning.training.train.train`), then, each round:
 
-1. rolls the current checkpoint out (:mod:`cake_drake.learning.checkpoint`) for
+1. rolls the current checkpoint out (:mod:`cake_drake.learning.policies.checkpoint`) for
    ``per_round`` episodes of the recording's task (``report.json``'s spec), on seeds after
    every seed the recording tried, on the local pool or on Ray
    (:func:`cake_drake.learning.parallel.imap`); at each step the expert's action is executed
    instead with probability ``beta`` (a coin drawn from the episode's seed);
 2. labels every visited state with the recording's demonstrator (the closed-loop expert,
-   :mod:`cake_drake.learning.expert`, by default), asked at every step on the real
+   :mod:`cake_drake.learning.policies.expert`, by default), asked at every step on the real
    observation; an episode ends where the expert is done (the goal, or no plan from the
    measured state; the closed-loop expert's repairs are unbounded here, since the
    learner's drift is not its failure), or where the task's step budget runs out;
@@ -42,9 +42,19 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
+from cake_drake.learning.data import dataset
+from cake_drake.learning.data.recording import (
+    keep_episode,
+    load_episode,
+    spec_from_json,
+    write_whole,
+)
 from cake_drake.learning.parallel import imap
+from cake_drake.learning.policies.skills import SKILL_LEARNER
 from cake_drake.learning.rollout import EXPERT, LEARNER_ACTED, EpisodeSpec, Teacher, rollout
-from cake_drake.scenario import Training
+from cake_drake.learning.training import train as training
+from cake_drake.scenario import CHECKPOINT_POLICY, Training
+from cake_drake.systems.policy_source import make_policy
 
 #: What DAgger writes in its output folder.
 DAGGER_OUTPUTS = ("checkpoints", "train.json", "rounds", "data", "rollouts")
@@ -68,9 +78,6 @@ def source(root: Path) -> tuple[dict, EpisodeSpec, list[Path]]:
     """The recording DAgger starts from: its report, the task its episodes ran on, and its
     kept episodes' files. One line (exit 2) where there is no task to roll a policy out on
     or no episodes to append to."""
-    from cake_drake.learning.dataset import read_report
-    from cake_drake.learning.recording import _spec_from_json
-
     root = Path(root)
     need = "as python -m cake_drake.record writes them"
     path = root / "report.json"
@@ -79,9 +86,9 @@ def source(root: Path) -> tuple[dict, EpisodeSpec, list[Path]]:
             f"{path}: missing; --dagger rolls the policy out on the recording's task, "
             f"named there ({need})"
         )
-    report = read_report(root)
+    report = dataset.read_report(root)
     try:
-        spec = _spec_from_json(report["spec"])
+        spec = spec_from_json(report["spec"])
         seeds = [int(s) for s in report["seeds"]]
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         raise InputError(
@@ -118,10 +125,8 @@ def _row(npz: Path, seed: int) -> dict:
 
 
 def _episodes(paths: list[Path], rows: list[dict]):
-    from cake_drake.learning.recording import _load
-
     for path, row in zip(paths, rows, strict=True):
-        yield _load(path, row, images=False)
+        yield load_episode(path, row, images=False)
 
 
 def labeller(spec, beta: float) -> Teacher:
@@ -138,8 +143,6 @@ def check_skill_teacher(teacher: Teacher) -> None:
     """A teacher for learned skills labels each frame with the ground action under way
     (``skill_observation()``, as the closed-loop expert does); one line (exit 2) naming
     what a teacher lacks otherwise."""
-    from cake_drake.systems.policy_source import make_policy
-
     probe = make_policy(teacher.policy, teacher.options)
     if not callable(getattr(probe, "skill_observation", None)):
         raise InputError(
@@ -172,12 +175,6 @@ def dagger(
     ``out`` is where the work is written: the command's staging folder, put in place of
     ``final`` (the folder the user named) only when every round has finished
     (:class:`cake_drake.outputs.files.OutputDir`); the files name ``final``."""
-    from cake_drake.learning import dataset
-    from cake_drake.learning import train as training
-    from cake_drake.learning.recording import _keep, _write_whole
-    from cake_drake.learning.skills import SKILL_LEARNER
-    from cake_drake.scenario import CHECKPOINT_POLICY
-
     root, out = Path(root), Path(out)
     check_rounds(rounds, per_round, beta, round_steps)
     report, spec, demo_files = source(root)
@@ -217,7 +214,7 @@ def dagger(
         jobs = [(learner, s, teacher) for s in seeds]
         rows, t0 = {}, time.perf_counter()
         for ep in imap(_rollout_one, jobs, workers, ray):
-            rows[ep.seed] = (_keep(ep, out / "rollouts", failed_too=True), ep)
+            rows[ep.seed] = (keep_episode(ep, out / "rollouts", failed_too=True), ep)
         phases["rollouts"] += time.perf_counter() - t0
         added = learner_frames = wins = 0
         for s in seeds:
@@ -239,7 +236,7 @@ def dagger(
             spec.control_mode,
             (),
         )
-        _write_whole(data / "report.json", json.dumps({
+        write_whole(data / "report.json", json.dumps({
             **report,
             "episodes": len(demo_files) + len(kept_files),
             "frames": frames,

@@ -20,6 +20,7 @@ import numpy as np
 from cake_drake.dynamic.residual import FILE, Kinematics, ResidualModel, fit, samples
 from cake_drake.errors import InputError
 from cake_drake.formats import read_npz
+from cake_drake.world.scene import make_control_plant
 
 #: The share of each run's samples held out to measure the fit.
 HELD_OUT = 0.2
@@ -58,8 +59,6 @@ def load_logs(run: Path) -> SimpleNamespace:
 
 def train_residual(runs: list[Path], out: Path, bound_nm: list[float] | None = None) -> dict:
     """Fit a residual to ``runs`` and write it to ``out``; the fit's figures."""
-    from cake_drake.world.scene import make_control_plant
-
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise InputError(f"{out}: not empty; choose another --out")

@@ -5,7 +5,7 @@ skills needs the perceptron's forward pass and its action queue, nothing else; i
 torch for it costs more than the whole classical run (about 620 MB and 1.4 s on these
 machines, against 290 MB and 1.4 s for a whole run). :class:`NumpyChunks` reads the same
 checkpoint files (``config.json``, ``model.safetensors``) and does the same arithmetic as
-:class:`cake_drake.learning.mlp.network.Chunks` (tests/test_mlp.py compares them); a
+:class:`cake_drake.learning.policies.mlp.network.Chunks` (tests/test_mlp.py compares them); a
 policy that sees keeps torch (its convolutions).
 """
 
@@ -19,10 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cake_drake.learning.mlp.features import (
+from cake_drake.learning.policies.mlp.features import (
     ARM,
     EXTRA_INPUTS,
     OBS_STATE,
+    camera_shapes,
     input_sizes,
 )
 
@@ -39,7 +40,7 @@ class NumpyChunks:
     ``select_action`` and ``predict_action_chunk`` on NumPy arrays, batched (B, ...)."""
 
     def __init__(self, folder: Path, ensemble: float = 0.0) -> None:
-        from safetensors.numpy import load_file
+        from safetensors.numpy import load_file  # safetensors: the lerobot extra's
 
         #: ACT's temporal ensembling (Zhao et al. 2023), 0: off. Above 0, a chunk is
         #: predicted at every step and each action is the weighted mean of every live
@@ -132,7 +133,7 @@ class TorchActing:
         self.network.reset()
 
     def select_action(self, batch: dict[str, np.ndarray]) -> np.ndarray:
-        import torch
+        import torch  # loaded already: the network is torch's (load)
 
         with torch.inference_mode():
             tensors = {k: torch.as_tensor(batch[k]).to(self.device) for k in self.input_keys}
@@ -143,14 +144,13 @@ def load(folder: Path, device: str = "cpu", ensemble: float = 0.0):
     """The ``cake_mlp`` checkpoint in ``folder``, acting on NumPy arrays: in NumPy when it
     reads numbers only and acts on the CPU, else through torch (``ensemble``, temporal
     ensembling: NumPy only)."""
-    from cake_drake.learning.mlp.features import camera_shapes
-
     folder = Path(folder)
     inputs = json.loads((folder / "config.json").read_text())["input_features"]
     if device == "cpu" and not camera_shapes(inputs):
         return NumpyChunks(folder, ensemble)
     if ensemble:
         raise ValueError("temporal ensembling acts in NumPy: a cake_mlp without cameras, cpu")
-    from cake_drake.learning.mlp.network import load as load_network
+    # torch (seconds) only for a network that reads cameras or acts on a GPU.
+    from cake_drake.learning.policies.mlp.network import load as load_network
 
     return TorchActing(load_network(folder, device), device)

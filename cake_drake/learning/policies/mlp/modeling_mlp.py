@@ -1,6 +1,6 @@
 """The ``cake_mlp`` policy: a multilayer perceptron over the state (and, for a policy that
 sees, each camera's keypoints) that predicts a chunk of joint-position actions (see
-:class:`CakeMLPConfig`). The arithmetic lives in :mod:`cake_drake.learning.mlp.network`
+:class:`CakeMLPConfig`). The arithmetic lives in :mod:`cake_drake.learning.policies.mlp.network`
 (torch alone); this is LeRobot's face of it: a ``PreTrainedPolicy`` with the training
 loss."""
 
@@ -10,9 +10,9 @@ from lerobot.policies.pretrained import PreTrainedPolicy
 from lerobot.utils.constants import ACTION
 from torch import Tensor
 
-from cake_drake.learning.mlp.configuration_mlp import CakeMLPConfig
-from cake_drake.learning.mlp.features import camera_shapes, input_sizes
-from cake_drake.learning.mlp.network import Chunks
+from cake_drake.learning.policies.mlp.configuration_mlp import CakeMLPConfig
+from cake_drake.learning.policies.mlp.features import camera_shapes, input_sizes
+from cake_drake.learning.policies.mlp.network import Chunks
 
 
 class CakeMLPPolicy(Chunks, PreTrainedPolicy):

@@ -22,7 +22,7 @@ from lerobot.utils.constants import (
     POLICY_PREPROCESSOR_DEFAULT_NAME,
 )
 
-from cake_drake.learning.mlp.configuration_mlp import CakeMLPConfig
+from cake_drake.learning.policies.mlp.configuration_mlp import CakeMLPConfig
 
 
 def make_cake_mlp_pre_post_processors(

@@ -205,7 +205,7 @@ def samples(recipe: PlannerRecipe, log=print) -> list[Sample]:
 
 
 def _model(width: int, seed: int):
-    import torch
+    import torch  # seconds, the lerobot extra: only while training (a plan is numpy)
 
     torch.manual_seed(seed)
     params = {}
@@ -264,7 +264,7 @@ def _batch(batch: list[Sample], extra: int):
 
 def _forward(p, arrays, n_graphs: int):
     """The action scores of a batch; the same arithmetic as the numpy planner's."""
-    import torch
+    import torch  # seconds, the lerobot extra: only while training (a plan is numpy)
 
     x0, g, rels, graph_of, acts, _, _, n_rounds, pairs = arrays
     x0 = torch.as_tensor(x0, dtype=torch.float32)
@@ -297,7 +297,7 @@ def _forward(p, arrays, n_graphs: int):
 
 def _loss(score, labels, groups, n_graphs: int):
     """-log of the probability the softmax over each state's actions puts on its optimal ones."""
-    import torch
+    import torch  # seconds, the lerobot extra: only while training (a plan is numpy)
 
     groups = torch.as_tensor(groups)
     labels = torch.as_tensor(labels)
@@ -333,7 +333,7 @@ def check_recipe(recipe: PlannerRecipe) -> None:
 def train_planner(recipe: PlannerRecipe, out, log=print) -> dict:
     """Train on exact labels of small problems and write the checkpoint (see :func:`export`
     for ``out``); returns what ``planner.json`` says of the training."""
-    import torch
+    import torch  # seconds, the lerobot extra: only while training (a plan is numpy)
 
     check_recipe(recipe)
     torch.set_num_threads(1)

@@ -1,6 +1,6 @@
 """What a ``cake_mlp`` reads, by LeRobot's feature names: torch-free, shared by the network
-(:mod:`cake_drake.learning.mlp.network`) and its NumPy acting
-(:mod:`cake_drake.learning.mlp.acting`)."""
+(:mod:`cake_drake.learning.policies.mlp.network`) and its NumPy acting
+(:mod:`cake_drake.learning.policies.mlp.acting`)."""
 
 from __future__ import annotations
 

@@ -1,0 +1,9 @@
+"""What learns: each learned kind's training, writing the folder its policy reads back.
+
+:mod:`.train` runs LeRobot's own loop (imitation), :mod:`.dagger` rounds of DAgger over
+it, :mod:`.rl` Stable-Baselines3's PPO or SAC (the RL policy's folder), :mod:`.residual`
+the dynamic layer's residual by least squares, and :mod:`.planner` the learned planner.
+What the results act with lives in :mod:`cake_drake.learning.policies` (and, for the
+residual and the planner, in their layers: :mod:`cake_drake.dynamic.residual`,
+:mod:`cake_drake.symbolic.learned`).
+"""
