@@ -22,12 +22,15 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 
+# The suite's own mutations (tests/test_hardening.py), run here by the ten thousand: the
+# one benchmark that reads the tests' folder.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-from test_hardening import EXIT_CODES, PLAN_5, TRANSCRIPT, mutated  # noqa: E402
+from test_hardening import EXIT_CODES, PLAN_5, TRANSCRIPT, mutated
 
-from cake_drake.cli import main_saycan, main_validate  # noqa: E402
-from cake_drake.errors import run_cli  # noqa: E402
-from cake_drake.symbolic import BLOCKSWORLD_DOMAIN, PROBLEM_5  # noqa: E402
+from cake_drake.commands.saycan import main_saycan
+from cake_drake.commands.validate import main_validate
+from cake_drake.errors import run_cli
+from cake_drake.symbolic import BLOCKSWORLD_DOMAIN, PROBLEM_5
 
 
 def fuzz(name: str, strategy, call, examples: int) -> tuple[collections.Counter, list[str]]:

@@ -278,8 +278,10 @@ def _entry_points() -> list[list[str]]:
     """Every command: each ``python -m cake_drake.X`` module, and the console script."""
     found = []
     for path in sorted((ROOT / "cake_drake").rglob("*.py")):
-        if 'if __name__ == "__main__":' not in path.read_text():
-            continue
+        text = path.read_text()
+        command = "cake_drake.commands" in text or "cake_drake.cli" in text
+        if 'if __name__ == "__main__":' not in text or not command:
+            continue  # not a command (processes.py's guard is a script, not a command)
         parts = path.relative_to(ROOT).with_suffix("").parts
         parts = parts[:-1] if parts[-1] == "__main__" else parts
         found.append(["-m", ".".join(parts)])

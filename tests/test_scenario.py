@@ -190,7 +190,7 @@ def test_an_output_folder_that_is_a_file_is_refused_up_front(tmp_path):
 
 
 def test_cli_flags_override_the_scenario_file(tmp_path):
-    from cake_drake.cli import run_parser, scenario_from_args
+    from cake_drake.commands.run import run_parser, scenario_from_args
 
     f = tmp_path / "s.yaml"
     f.write_text("k: {controller: !ComputedTorque {kp: [50.0], kd: [5.0]}, seed: 3}\n")

@@ -3,13 +3,13 @@
 A transcript's numbered steps (:mod:`.transcript`) go through a small lexicon
 (:mod:`.lexicon`): each skill phrase stands for HTN-style methods
 (:mod:`.methods`), the first whose precondition holds in the current state
-decides which ground actions the step becomes. The actions are simulated with
-the symbolic layer's STRIPS semantics and compared with a planner's plan
-(:mod:`.mapping`); :mod:`.report` renders the result and its note. The CLI is
-``python -m cake_drake.saycan``.
+decides which ground actions the step becomes (:mod:`.reading` reads a step's
+words). The actions are simulated with the symbolic layer's STRIPS semantics and
+compared with a planner's plan (:mod:`.mapping`); :mod:`.objects` declares the
+objects a transcript names that a problem lacks; :mod:`.report` renders the result
+and its note. The CLI is ``python -m cake_drake.saycan``.
 """
 
-from cake_drake import MODELS_DIR
 from cake_drake.language.lexicon import END_PHRASES, NOUN_ALIASES, VERBS, Verb
 from cake_drake.language.mapping import (
     AFTER_DONE,
@@ -24,12 +24,11 @@ from cake_drake.language.mapping import (
     Analysis,
     StepResult,
     analyse,
-    missing_objects,
     problem_with_goal,
     side_by_side,
-    with_objects,
 )
 from cake_drake.language.methods import Method, MethodStep, method_bindings
+from cake_drake.language.objects import missing_objects, with_objects
 from cake_drake.language.report import (
     SAYCAN_OUTPUTS,
     render_markdown,
@@ -38,6 +37,7 @@ from cake_drake.language.report import (
     write_outputs,
 )
 from cake_drake.language.transcript import Step, Transcript, load_transcript, parse_transcript
+from cake_drake.paths import MODELS_DIR
 
 #: The kitchen domain; the default kitchen (SayCan's, no goal); the same with the
 #: things SayCan's planning prompt names.

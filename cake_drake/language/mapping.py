@@ -14,6 +14,9 @@ Each step gets a verdict:
 - ``no schema``: the verb or an object is not in the lexicon / domain / problem;
 - ``done``: the end marker; ``not reached``: after a step that failed;
   ``after done``: steps written after the end marker (ignored).
+
+How a step's words are read (its skill phrase, the objects its nouns name) is
+:mod:`.reading`; ``--add-objects`` is :mod:`.objects`.
 """
 
 from __future__ import annotations
@@ -24,18 +27,20 @@ import re
 from dataclasses import dataclass, field
 
 from cake_drake.errors import CakeDrakeError, InputError
-from cake_drake.language.lexicon import (
-    ARTICLES,
-    END_PHRASES,
-    GLOSSES,
-    NOUN_ALIASES,
-    PACKAGING,
-    PRONOUNS,
-    VERBS,
-    Verb,
-    verb_vocabulary,
-)
+from cake_drake.language.lexicon import END_PHRASES, GLOSSES, Verb
 from cake_drake.language.methods import Method, MethodStep, explain, method_bindings
+from cake_drake.language.objects import _where_predicates
+from cake_drake.language.reading import (
+    _Ambiguous,
+    _leading_verb,
+    _listing,
+    _NoSchema,
+    _Reference,
+    _resolve_slots,
+    _spaced,
+    match_verb,
+    unknown_verb_message,
+)
 from cake_drake.language.transcript import Step, Transcript
 from cake_drake.symbolic import (
     Fact,
@@ -73,7 +78,6 @@ SKILL_VERDICTS = (
 )
 
 _MAX_BINDINGS = 20000
-_PARTICLES = {"up", "down", "on", "off", "away", "in", "out", "over", "back", "to", "for"}
 
 
 @dataclass(frozen=True)
@@ -138,194 +142,8 @@ class Analysis:
         return self.actions + ((self.failed_action,) if self.failed_action else ())
 
 
-class _NoSchema(Exception):
-    def __init__(self, message: str, need: str = ""):
-        super().__init__(message)
-        self.need = need
-
-
 class _GoalNotInProblem(Exception):
     """The transcript's goal names objects the problem lacks (a note, not bad input)."""
-
-
-class _Ambiguous(Exception):
-    def __init__(self, message: str, candidates: tuple[str, ...], need: str):
-        super().__init__(message)
-        self.candidates = candidates
-        self.need = need
-
-
-# ----------------------------------------------------------------------- the lexicon
-
-
-def _pattern(phrase: str) -> re.Pattern:
-    parts = re.split(r"(\{[xy]\})", phrase)
-    rx = "".join(f"(?P<{p[1]}>.+?)" if p in ("{x}", "{y}") else re.escape(p) for p in parts)
-    return re.compile(f"^{rx}$")
-
-
-_PATTERNS: list[tuple[Verb, re.Pattern]] = [(v, _pattern(p)) for v in VERBS for p in v.phrases]
-
-
-def match_verb(text: str) -> tuple[Verb, dict[str, str]] | None:
-    """The first skill phrase matching the whole step text, with its noun slots."""
-    for verb, rx in _PATTERNS:
-        m = rx.match(text)
-        if m:
-            return verb, {k: v.strip() for k, v in m.groupdict().items()}
-    return None
-
-
-def _leading_verb(text: str) -> str:
-    words = text.split()
-    if len(words) > 1 and words[1] in _PARTICLES:
-        return " ".join(words[:2])
-    return words[0] if words else text
-
-
-def unknown_verb_message(text: str) -> str:
-    """Why no skill phrase matches ``text``: an unknown verb, or a known verb phrased oddly."""
-    first = text.split()[0] if text.split() else text
-    near = [p for v in VERBS for p in v.phrases if p.split()[0] == first]
-    if near:
-        return f"no skill phrase fits '{text}' (phrases with '{first}': {', '.join(near)})"
-    return (
-        f"verb '{_leading_verb(text)}' is not in the lexicon "
-        f"(skills: {', '.join(verb_vocabulary())})"
-    )
-
-
-def _listing(names, limit: int = 24) -> str:
-    names = list(names)
-    shown = ", ".join(names[:limit])
-    return shown if len(names) <= limit else f"{shown}, ... ({len(names) - limit} more)"
-
-
-def _spaced(name: str) -> str:
-    return name.replace("-", " ")
-
-
-def _strip_articles(phrase: str) -> str:
-    words = phrase.split()
-    while words and words[0] in ARTICLES:
-        words = words[1:]
-    return " ".join(words)
-
-
-def _singulars(p: str) -> list[str]:
-    out = [p]
-    if p.endswith("ies"):
-        out.append(p[:-3] + "y")
-    if p.endswith("es"):
-        out.append(p[:-2])
-    if p.endswith("s"):
-        out.append(p[:-1])
-    return out
-
-
-def noun_candidates(phrase: str, problem: Problem) -> list[str]:
-    """The objects a noun phrase (articles already dropped) may name: none, one or several.
-
-    Exact name, then alias, then a plural read as singular, then a packaging word
-    dropped ("coke can", "can of coke"), then the head noun ("counter" ends both
-    "close counter" and "far counter").
-    """
-    objects = problem.object_types
-    by_name = {_spaced(o): o for o in objects} | {o: o for o in objects}
-    forms = _singulars(phrase)
-    for t in forms:
-        if t in by_name:
-            return [by_name[t]]
-        if t in NOUN_ALIASES and NOUN_ALIASES[t] in objects:
-            return [NOUN_ALIASES[t]]
-    words = phrase.split()
-    if len(words) >= 2 and words[-1] in PACKAGING:
-        found = noun_candidates(" ".join(words[:-1]), problem)
-        if found:
-            return found
-    if len(words) >= 3 and words[0] in PACKAGING and words[1] == "of":
-        found = noun_candidates(" ".join(words[2:]), problem)
-        if found:
-            return found
-    for t in forms:
-        heads = sorted({o for name, o in by_name.items() if name.endswith(" " + t)})
-        if heads:
-            return heads
-    return []
-
-
-@dataclass
-class _Reference:
-    """What "it" stands for: the last item resolved, or the last item phrase that was not."""
-
-    item: str | None = None
-    unresolved: tuple[str, int] | None = None  # (phrase, step number)
-
-
-def _request_hint(request: str, candidates: tuple[str, ...]) -> str:
-    text = " " + re.sub(r"[^a-z0-9 ]+", " ", request.lower()) + " "
-    named = [c for c in candidates if f" {_spaced(c)} " in text]
-    if len(named) == 1:
-        return f"; the request names '{_spaced(named[0])}'"
-    return ""
-
-
-def resolve_noun(
-    phrase: str, problem: Problem, ref: _Reference, request: str = "", step: int = 0
-) -> str:
-    """The problem object a noun phrase names; :class:`_NoSchema` or :class:`_Ambiguous`."""
-    p = _strip_articles(phrase)
-    if p in PRONOUNS:
-        if ref.item is not None:
-            return ref.item
-        if ref.unresolved is not None:
-            said, where = ref.unresolved
-            raise _NoSchema(
-                f"'{p}' stands for '{said}' (step {where}), which names no object of "
-                f"problem '{problem.name}'",
-                need=f"'{_strip_articles(said)}' among the problem's objects",
-            )
-        raise _NoSchema(
-            f"'{p}' refers to nothing: no earlier step names an item",
-            need="an earlier step that names the item 'it' stands for",
-        )
-    found = noun_candidates(p, problem) if p else []
-    if len(found) == 1:
-        return found[0]
-    if len(found) > 1:
-        cands = tuple(found)
-        hint = _request_hint(request, cands)
-        raise _Ambiguous(
-            f"'{p}' is ambiguous in problem '{problem.name}': it may be "
-            f"{', '.join(cands[:-1])} or {cands[-1]}{hint}",
-            cands,
-            need=f"a referring expression resolved to one object ({' or '.join(cands)})" + hint,
-        )
-    if step and p and ref is not None:
-        ref.unresolved = (p, step)
-    raise _NoSchema(
-        f"'{p or phrase}' is not an object of problem '{problem.name}' "
-        f"(objects: {_listing(sorted(problem.object_types))})",
-        need=f"'{p or phrase}' among the problem's objects, with its initial place",
-    )
-
-
-def _resolve_slots(
-    verb: Verb, phrases: dict[str, str], problem: Problem, ref: _Reference, request: str, step: int
-) -> dict[str, str]:
-    """Resolve the step's noun slots, keeping track of what "it" will stand for."""
-    slots: dict[str, str] = {}
-    for k in sorted(phrases):
-        item_slot = k == "x" and verb.x_is_item
-        try:
-            slots[k] = resolve_noun(phrases[k], problem, ref, request, step if item_slot else 0)
-        except _Ambiguous:
-            if item_slot:
-                ref.item, ref.unresolved = None, (_strip_articles(phrases[k]), step)
-            raise
-        if item_slot:
-            ref.item, ref.unresolved = slots[k], None
-    return slots
 
 
 # ----------------------------------------------------------------------- binding
@@ -774,116 +592,3 @@ def side_by_side(
         last_left = max((i for i, (_, la, _) in enumerate(rows) if la), default=-1)
         rows.insert(last_left + 1, ("x", str(failed), ""))
     return rows
-
-
-# ----------------------------------------------------------------------- --add-objects
-
-
-def _slot_type(verb: Verb, slot: str, problem: Problem) -> str | None:
-    """The type the domain gives the schema parameter a verb's ``{slot}`` fills."""
-    for method in verb.methods:
-        for step in method.steps:
-            schema = problem.domain.actions.get(step.schema)
-            if schema is None:
-                continue
-            for param, value in step.args:
-                if value == slot:
-                    for var, kind in schema.params:
-                        if var == param:
-                            return kind
-    return None
-
-
-def missing_objects(transcript: Transcript, problem: Problem) -> list[tuple[str, str]]:
-    """(name, type) of every object the transcript's steps name that the problem lacks,
-    typed by the schema parameter its noun fills (an item, a location, a container), in
-    the order the steps name them."""
-    found: dict[str, str] = {}
-    for step in transcript.steps:
-        matched = match_verb(step.text) if step.text else None
-        if matched is None:
-            continue
-        verb, phrases = matched
-        for slot, phrase in sorted(phrases.items()):
-            p = _strip_articles(phrase)
-            if not p or p in PRONOUNS or noun_candidates(p, problem):
-                continue
-            kind = _slot_type(verb, slot, problem)
-            name = re.sub(r"[^a-z0-9]+", "-", _singulars(p)[-1]).strip("-")
-            if kind and name and name not in found and name not in problem.object_types:
-                found[name] = kind
-    return list(found.items())
-
-
-def _where_predicates(problem: Problem, kind: str) -> list[str]:
-    """The predicates that say where a thing of type ``kind`` is: ``(P ?x - T ?l - location)``
-    with ``kind`` a subtype of ``T`` (``at-location`` for an item, ``container-at`` for a
-    container; none for a location)."""
-    domain = problem.domain
-    return [
-        pred.name
-        for pred in domain.predicates.values()
-        if len(pred.params) == 2
-        and pred.params[1][1] == "location"
-        and domain.is_subtype(kind, pred.params[0][1])
-    ]
-
-
-def _section_end(text: str, start: int) -> int:
-    """The index of the parenthesis that closes the one opened at ``start``."""
-    depth, i = 0, start
-    while i < len(text):
-        depth += {"(": 1, ")": -1}.get(text[i], 0)
-        if depth == 0:
-            return i
-        i += 1
-    return i
-
-
-def with_objects(problem: Problem, objects: list[tuple[str, str]]) -> Problem:
-    """``problem`` with ``objects`` declared, each thing that stands somewhere at a place of
-    its own, ``<name>-spot``: a location no other fact names.
-
-    Nobody said where an added object is, so no place of the kitchen is chosen for it: the
-    spot only says that it is somewhere, and only a step that goes where the object is
-    (``find``) reaches it. A step that needs the object elsewhere, in hand or where the
-    robot already stands fails on what the transcript itself assumed.
-    """
-    if not objects:
-        return problem
-    text = problem.text
-    m = re.search(r"\(:objects\b", text, re.IGNORECASE)
-    if m is None:
-        raise InputError(f"{problem.problem_path}: no (:objects ...) to add objects to")
-    declared = set(problem.object_types) | {name for name, _ in objects}
-    spots: list[str] = []
-    facts: list[str] = []
-    for name, kind in objects:
-        where = _where_predicates(problem, kind)
-        if not where:
-            continue
-        spot = f"{name}-spot"
-        while spot in declared:
-            spot += "-"
-        declared.add(spot)
-        spots.append(spot)
-        facts += [f"({pred} {name} {spot})" for pred in where]
-    i = _section_end(text, m.start())
-    added = "".join(f"\n    {name} - {kind}" for name, kind in objects)
-    added += "".join(f"\n    {spot} - location" for spot in spots)
-    composed = text[:i] + added + "  ; added by --add-objects\n  " + text[i:]
-    if facts:
-        init = re.search(r"\(:init\b", composed, re.IGNORECASE)
-        if init is None:
-            raise InputError(f"{problem.problem_path}: no (:init ...) to place objects in")
-        j = init.end()
-        where_facts = " ".join(facts)
-        composed = (
-            composed[:j]
-            + "\n    ; added by --add-objects: each in a place of its own, where nobody said\n"
-            + f"    {where_facts}"
-            + composed[j:]
-        )
-    return parse_problem(
-        problem.domain, composed, problem.problem_path, require_goal=problem.has_goal
-    )

@@ -1,9 +1,9 @@
 """``python -m cake_drake.world``: lay out a problem's initial state and render it.
 
-The argument parsing lives in :mod:`cake_drake.cli`; the work in :mod:`.show`.
+The argument parsing lives in :mod:`cake_drake.commands.world`; the work in :mod:`.show`.
 """
 
-from cake_drake.cli import main_world
+from cake_drake.commands.world import main_world
 from cake_drake.errors import exit_now, run_cli
 
 if __name__ == "__main__":
