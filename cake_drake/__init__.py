@@ -2,17 +2,17 @@
 
 Layers (one sub-package each): ``symbolic`` (PDDL -> plan), ``world`` (the scene),
 ``geometric`` (waypoints -> IK -> joint trajectory), ``dynamic`` (controllers),
-``systems`` (our LeafSystems) and ``diagram`` (the wiring).
+``systems`` (our LeafSystems) and ``diagram`` (the wiring); ``learning`` above the
+pipeline (the learned half), ``commands`` above all (one module a command). Their order
+is a contract (docs/architecture.md).
 """
 
 import os
 import sys
-from pathlib import Path
 
 __version__ = "0.1.0"
 
-#: Repository folder that holds the scene, robot and PDDL files.
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+from cake_drake.paths import MODELS_DIR as MODELS_DIR  # noqa: E402 - the models/ folder
 
 
 def started_as_command() -> bool:

@@ -39,8 +39,9 @@ from cake_drake.geometric.free_space import FreeSpace
 from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.planners import make_planner
 from cake_drake.geometric.solve import Planning, TimedSolver
+from cake_drake.paths import portable_path, resolve_path
 from cake_drake.plugins import PluginError, is_plugin
-from cake_drake.scenario import Policy, Recorded, Scenario, portable_path, resolve_path
+from cake_drake.scenario import Policy, Recorded, Scenario
 from cake_drake.symbolic import GroundAction, Problem
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
 from cake_drake.systems import SourceContext, make_action_source

@@ -32,7 +32,7 @@ from pathlib import Path
 import yaml
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
-from cake_drake import MODELS_DIR, __version__
+from cake_drake import __version__
 from cake_drake.dynamic.controllers import (
     ComputedTorque,
     ControllerConfig,
@@ -43,14 +43,13 @@ from cake_drake.dynamic.controllers import (
 from cake_drake.errors import InputError
 from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
+from cake_drake.paths import PACKAGE, portable_path, resolve_path
 from cake_drake.symbolic import DEFAULT_PLANNER
 from cake_drake.symbolic.learned import PREFIX as LEARNED_AT
 from cake_drake.symbolic.sexpr import read_text
 from cake_drake.world.cameras import Camera
 from cake_drake.world.faults import FaultConfig, Knock, Move, RandomFault, Slip
 from cake_drake.world.scene import WorldConfig
-
-PACKAGE = "package://cake_drake/"
 
 
 @dataclass
@@ -216,7 +215,7 @@ class PolicyRecipe:
 class Reward:
     """What a step of reinforcement learning is worth: a weight per term, each term a
     number from 0 to 1 read from the measured world at every step
-    (:mod:`cake_drake.learning.rewards` defines them). Unset, ``goal`` weighs 1 and the
+    (:mod:`cake_drake.learning.envs.rewards` defines them). Unset, ``goal`` weighs 1 and the
     others 0: the Gym env's own reward."""
 
     #: The fraction of the goal's facts measured true (the Gym env's own reward).
@@ -377,31 +376,6 @@ CHECKPOINT_CHECK = "cake_drake.learning.checkpoint:check_folder"
 CHECKPOINT_DESCRIBE = "cake_drake.learning.checkpoint:describe"
 SKILL_POLICY = "cake_drake.learning.skills:make"
 SKILL_CHECK = "cake_drake.learning.skills:check_folder"
-
-
-def resolve_path(path: str, base: Path | None = None) -> Path:
-    """A scenario path as a file system path (``package://cake_drake/`` is ``models/``)."""
-    if path.startswith(PACKAGE):
-        return MODELS_DIR / path[len(PACKAGE) :]
-    if path.startswith("package://"):
-        raise InputError(f"{path}: only package://cake_drake/... is known (the models/ folder)")
-    p = Path(path).expanduser()
-    return p if p.is_absolute() or base is None else base / p
-
-
-def portable_path(path: str | Path) -> str:
-    """``package://cake_drake/...`` for a shipped file, else the absolute path."""
-    if str(path).startswith(PACKAGE):  # already portable (never a folder named package:)
-        return str(path)
-    given = Path(path).expanduser()
-    if given.exists() and not given.is_file() and not given.is_dir():
-        # A pipe (bash's <(...) is /dev/fd/N): resolving it names the pipe's inode.
-        return str(given.absolute())
-    p = given.resolve()
-    try:
-        return PACKAGE + p.relative_to(MODELS_DIR.resolve()).as_posix()
-    except ValueError:
-        return str(p)
 
 
 def _scenario_paths(scenario: Scenario):

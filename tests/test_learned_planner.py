@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from cake_drake.errors import InputError, NoPlanError
-from cake_drake.learning.planner import PlannerRecipe, Space, export, samples
+from cake_drake.learning.training.planner import PlannerRecipe, Space, export, samples
 from cake_drake.symbolic import (
     BLOCKSWORLD_DOMAIN,
     NAMINGS,

@@ -98,7 +98,7 @@ def test_a_skill_that_hangs_is_stopped_at_its_budget_naming_it(monkeypatch, tmp_
 
 
 def test_the_lerobot_env_offers_only_learning_tasks():
-    from cake_drake.learning.lerobot_env import CakeDrakeEnv
+    from cake_drake.learning.envs.lerobot_env import CakeDrakeEnv
 
     with pytest.raises(ValueError) as e:
         CakeDrakeEnv(task="learned_tower5")

@@ -30,7 +30,9 @@ from pydrake.systems.controllers import InverseDynamics, InverseDynamicsControll
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 from pydrake.systems.primitives import Adder, Saturation
 
+from cake_drake.dynamic.residual import ResidualModel, check_bound
 from cake_drake.errors import InputError
+from cake_drake.paths import resolve_path
 from cake_drake.plugins import PluginError, guarded, load_attribute, require
 from cake_drake.world.scene import Scene
 
@@ -105,9 +107,6 @@ class ComputedTorque:
 
     def residual_model(self):
         """The residual (refused in one line, exit 2, when it is none this arm can run)."""
-        from cake_drake.dynamic.residual import ResidualModel, check_bound
-        from cake_drake.scenario import resolve_path
-
         model = ResidualModel.load(resolve_path(self.residual))
         check_bound(model.bound_nm, TORQUE_LIMITS, f"controller.residual {self.residual}")
         return model

@@ -33,8 +33,9 @@ from cake_drake.errors import ExecutionError, InputError
 from cake_drake.execution import Logs
 from cake_drake.formats import read_npz
 from cake_drake.outputs.files import OutputDir
+from cake_drake.paths import resolve_path
 from cake_drake.pipeline import check, run, run_inputs
-from cake_drake.scenario import ComputedTorque, JointPd, Recorded, Scenario, resolve_path
+from cake_drake.scenario import ComputedTorque, JointPd, Recorded, Scenario
 from cake_drake.sweeps import LocalPool, Sweep, run_sweep
 
 FINAL_HOLD_S = 1.0

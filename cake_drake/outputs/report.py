@@ -47,8 +47,9 @@ def trajectory_samples(cake, execution) -> tuple[dict[str, np.ndarray], list[str
 def layers(scenario, plan) -> dict:
     """Each layer of the cake, classical (which one) or learned (which checkpoint): the
     label the chapter asks a student to put on every layer of a system."""
+    from cake_drake.paths import resolve_path
     from cake_drake.plugins import load_attribute
-    from cake_drake.scenario import CHECKPOINT_DESCRIBE, Policy, Recorded, resolve_path
+    from cake_drake.scenario import CHECKPOINT_DESCRIBE, Policy, Recorded
     from cake_drake.symbolic.learned import is_learned
 
     reference, motion = scenario.reference, scenario.motion

@@ -9,7 +9,7 @@ names) and Blocksworld helpers and generators (:mod:`.blocksworld`). Facts are
 tuples of lower-case strings: ``("on", "a", "b")``, ``("arm-empty",)``.
 """
 
-from cake_drake import MODELS_DIR
+from cake_drake.paths import MODELS_DIR
 from cake_drake.symbolic.blocksworld import (
     NAMINGS,
     Naming,

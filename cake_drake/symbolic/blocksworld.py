@@ -18,8 +18,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError
+from cake_drake.paths import MODELS_DIR
 from cake_drake.symbolic.pddl import Domain, Fact
 from cake_drake.symbolic.roles import CANONICAL, Vocabulary, block_key
 from cake_drake.symbolic.roles import is_blocksworld as _is_blocksworld

@@ -21,7 +21,7 @@ block twice costs) or the time limit ends it with :class:`NoPlanError`
 naming the reason; the planner registry validates every plan it returns.
 
 Inference is plain numpy (planning needs no torch); training lives in
-:mod:`cake_drake.learning.planner`. A checkpoint is a folder with
+:mod:`cake_drake.learning.training.planner`. A checkpoint is a folder with
 ``planner.json`` (what it is, its architecture, how it was trained) and
 ``weights.npz``, read by :func:`load_planner` alone, which checks the two
 against each other before anything plans with them.
@@ -40,14 +40,13 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError, NoPlanError
-from cake_drake.formats import npz_headers, read_npz
+from cake_drake.formats import MAX_INPUT_BYTES, npz_headers, read_npz
+from cake_drake.paths import MODELS_DIR, portable_path, resolve_path
 from cake_drake.symbolic.diagnose import diagnose
 from cake_drake.symbolic.grounding import check_action, ground_all, relaxed_reachable
 from cake_drake.symbolic.pddl import GroundAction, Problem
 from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
-from cake_drake.symbolic.sexpr import MAX_INPUT_BYTES
 
 #: What a learned planner's ``planner.json`` says it is.
 KIND = "cake_drake.learned_planner"
@@ -83,7 +82,6 @@ UNARY_HEADS = ("pick-up", "put-down")
 BINARY_HEADS = ("unstack", "stack")
 
 TABLE, HELD = -1, -2
-_PACKAGE = "package://cake_drake/"
 
 
 def weight_shapes(width: int) -> dict[str, tuple[int, ...]]:
@@ -347,7 +345,7 @@ def load_planner(path: str | Path) -> LearnedPlanner:
     ``planner.json`` must say it is a learned planner of this format, with an
     architecture this version reads; ``weights.npz`` must hold exactly the arrays
     that architecture needs, with their shapes, all finite numbers. Either file over
-    :data:`~cake_drake.symbolic.sexpr.MAX_INPUT_BYTES` is refused unread, and the
+    :data:`~cake_drake.formats.MAX_INPUT_BYTES` is refused unread, and the
     weights are read by the project's one checked reader
     (:func:`cake_drake.formats.read_npz`): every array is looked at by its npy header
     before anything is decompressed, and nothing is unpickled. Checked checkpoints are
@@ -440,10 +438,8 @@ def checkpoint_of(spec: str) -> Path:
     if spec == "learned":
         return SHIPPED
     folder = spec[len(PREFIX) :] if spec.startswith(PREFIX) else ""
-    if folder.startswith(_PACKAGE):
-        return MODELS_DIR / folder[len(_PACKAGE) :]
     if folder:
-        return Path(folder).expanduser()
+        return resolve_path(folder)
     raise InputError(f"planner {spec!r}: a learned planner is 'learned' or 'learned@DIR'")
 
 
@@ -664,6 +660,11 @@ def plan_learned(
     return tuple(ground(a) for a in out.actions), learned
 
 
+def describe_folder(path: str | Path) -> str:
+    """:func:`describe` of the checked checkpoint at ``path`` (:mod:`cake_drake.artifacts`)."""
+    return describe(load_planner(path))
+
+
 def describe(learned: LearnedPlanner) -> str:
     """One phrase for ``plan.txt`` and the layers line: the network, its training, its folder
     (``package://cake_drake/...`` for a shipped one, else the absolute path)."""
@@ -672,9 +673,5 @@ def describe(learned: LearnedPlanner) -> str:
     trained = ""
     if isinstance(sizes, list) and len(sizes) == 2:
         trained = f", trained on {sizes[0]}-{sizes[1]} blocks"
-    folder = learned.path.resolve()
-    try:
-        where = _PACKAGE + folder.relative_to(MODELS_DIR.resolve()).as_posix()
-    except ValueError:
-        where = str(folder)
+    where = portable_path(learned.path)
     return f"relational network, width {learned.width}{trained}: {where}"

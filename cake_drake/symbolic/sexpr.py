@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cake_drake.errors import InputError, PddlError
+from cake_drake.formats import MAX_INPUT_BYTES
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,6 @@ def where(source: str, node: Node | None = None) -> str:
 
 
 #: Inputs larger than this are refused unread: no domain, problem, plan or transcript is.
-MAX_INPUT_BYTES = 16 * 1024 * 1024
 #: Deepest nesting of parentheses accepted (a formula of a real domain nests < 10 deep).
 MAX_DEPTH = 64
 

@@ -265,7 +265,8 @@ def policy_of(ref) -> tuple[str, dict]:
     and ``options``, or, for a ``checkpoint``, the learned layer's adapter (through the
     plug-in door) with the folder and device."""
     if ref.checkpoint:
-        from cake_drake.scenario import CHECKPOINT_POLICY, resolve_path
+        from cake_drake.paths import resolve_path
+        from cake_drake.scenario import CHECKPOINT_POLICY
 
         return CHECKPOINT_POLICY, {"path": str(resolve_path(ref.checkpoint)), "device": ref.device}
     return ref.factory, dict(ref.options)

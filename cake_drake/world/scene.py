@@ -40,13 +40,13 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import DiagramBuilder
 
-from cake_drake import MODELS_DIR
 from cake_drake.errors import InputError
+from cake_drake.paths import MODELS_DIR, PACKAGE
 
 CUBE_SIZE = 0.04  # m, edge of every cube
 CUBE_MASS = 0.05  # kg, every cube's mass in models/cubes/cube.urdf
 #: Every block is an instance of this one model; its colour is set per instance.
-CUBE_MODEL = "package://cake_drake/cubes/cube.urdf"
+CUBE_MODEL = PACKAGE + "cubes/cube.urdf"
 #: The first eight cube colours, by name (blocks take colours in natural order of their
 #: names: for a..e, block a is the red cube). Further cubes take :func:`cube_colour`'s.
 CUBE_COLOURS: dict[str, tuple[float, float, float]] = {
@@ -65,8 +65,8 @@ FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
 X_HAND_GRASP = RigidTransform([0.0, 0.0, 0.1034])
 #: A comfortable arm configuration above the table (hand pointing down).
 Q_HOME = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 1.9, math.pi / 4])
-SCENE_DIRECTIVES = "package://cake_drake/scene/panda_on_table.dmd.yaml"
-CONTROL_DIRECTIVES = "package://cake_drake/scene/panda_control.dmd.yaml"
+SCENE_DIRECTIVES = PACKAGE + "scene/panda_on_table.dmd.yaml"
+CONTROL_DIRECTIVES = PACKAGE + "scene/panda_control.dmd.yaml"
 
 
 #: The table top (models/scene/table.urdf): x from -0.25 to 0.95 m, y within +-0.6 m.
@@ -212,7 +212,8 @@ class Scene:
 
 
 def package_map() -> PackageMap:
-    """The one package the models refer to: ``cake_drake``, the ``models/`` folder."""
+    """The one package the models refer to: ``cake_drake``, the ``models/`` folder
+    (:data:`cake_drake.paths.PACKAGE`)."""
     packages = PackageMap.MakeEmpty()
     packages.Add("cake_drake", str(MODELS_DIR))
     return packages

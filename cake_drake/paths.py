@@ -1,0 +1,51 @@
+"""Where the project's files are: ``package://cake_drake/...`` and the ``models/`` folder.
+
+Every path a user gives (a scenario's fields, a flag, a checkpoint's base) is either a
+file system path or ``package://cake_drake/...``, which names a file under the
+repository's ``models/`` folder, as Drake's ``PackageMap`` does for the scene
+(``models/package.xml``). :func:`resolve_path` turns one into a file system path;
+:func:`portable_path` writes one back, as a package URL where it is a shipped file, so a
+saved scenario runs again from any working folder and on any machine. Below every layer:
+imports nothing of the project's but its errors.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cake_drake.errors import InputError
+
+#: The repository folder that holds the scene, the robot, the PDDL files and the shipped
+#: learned layers.
+MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+#: The package URL of ``models/``.
+PACKAGE = "package://cake_drake/"
+
+
+def resolve_path(path: str, base: Path | None = None) -> Path:
+    """A path as a file system path: ``package://cake_drake/`` is ``models/``; a relative
+    path is taken from ``base`` (a scenario file's folder) where one is given."""
+    if path.startswith(PACKAGE):
+        return MODELS_DIR / path[len(PACKAGE) :]
+    if path.startswith("package://"):
+        raise InputError(f"{path}: only package://cake_drake/... is known (the models/ folder)")
+    p = Path(path).expanduser()
+    return p if p.is_absolute() or base is None else base / p
+
+
+def portable_path(path: str | Path) -> str:
+    """``package://cake_drake/...`` for a shipped file, else the absolute path."""
+    if str(path).startswith(PACKAGE):  # already portable (never a folder named package:)
+        return str(path)
+    given = Path(path).expanduser()
+    if given.exists() and not given.is_file() and not given.is_dir():
+        # A pipe (bash's <(...) is /dev/fd/N): resolving it names the pipe's inode.
+        return str(given.absolute())
+    p = given.resolve()
+    try:
+        return PACKAGE + p.relative_to(MODELS_DIR.resolve()).as_posix()
+    except ValueError:
+        return str(p)
+
+
+__all__ = ["MODELS_DIR", "PACKAGE", "portable_path", "resolve_path"]
