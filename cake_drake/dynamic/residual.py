@@ -124,6 +124,12 @@ class ResidualModel:
         return np.clip(raw, -bound, bound)
 
 
+def load_model(folder: str | Path) -> ResidualModel:
+    """The checked residual in ``folder`` (:meth:`ResidualModel.load`), as
+    :mod:`cake_drake.artifacts` loads every learned thing."""
+    return ResidualModel.load(Path(folder))
+
+
 def holding(opening: float) -> float:
     """1 while one finger's measured opening says a cube is held (:data:`HOLD`), else 0."""
     return 1.0 if HOLD[0] <= opening <= HOLD[1] else 0.0
