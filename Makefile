@@ -150,7 +150,7 @@ notebooks: system-packages-test $(TEST_STAMP) $(BYTECODE)
 	$(PY) notebooks/refresh.py
 
 lint: $(TEST_STAMP) $(BYTECODE)
-	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
+	$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check . && $(VENV)/bin/lint-imports
 
 # The planning table compares Fast Downward too (the test extra has it).
 bench: system-packages-run $(TEST_STAMP) $(BYTECODE)

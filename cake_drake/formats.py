@@ -8,7 +8,7 @@ whose arrays (all of them, by their npy headers) would decompress past
 and checks each one's shape against the caller's expectation. Every failure is one
 :class:`InputError` line naming the file, the array and what would be valid; nothing
 is unpickled. The kinds' own checks (times that increase, seven joints) stay with their
-readers: :func:`load_npz` here, :func:`cake_drake.learning.residual.load_logs`.
+readers: :func:`load_npz` here, :func:`cake_drake.learning.training.residual.load_logs`.
 """
 
 from __future__ import annotations
@@ -39,6 +39,9 @@ def read_json_mapping(path: str | Path, what: str) -> dict:
     return data
 
 
+#: The largest input file read at all (PDDL, plans, scenarios, checkpoints' descriptions):
+#: anything larger is refused unread.
+MAX_INPUT_BYTES = 16 * 1024 * 1024
 #: The most an .npz's arrays may hold once decompressed (a run's trajectory is ~1 MB).
 MAX_NPZ_ARRAY_BYTES = 256 * 2**20
 
@@ -58,8 +61,6 @@ def npz_headers(
     file itself may be at most ``file_limit`` bytes (default: the inputs' limit,
     ``MAX_INPUT_BYTES``; an uncompressed kept episode with its frames may be larger).
     """
-    from cake_drake.symbolic.sexpr import MAX_INPUT_BYTES
-
     limit = MAX_INPUT_BYTES if file_limit is None else file_limit
     if path.exists() and not path.is_file():
         raise InputError(f"{path}: not a regular file; {expected}")
@@ -148,7 +149,8 @@ def read_npz(
         if len(shape) != len(want) or any(
             isinstance(w, int) and s != w for s, w in zip(shape, want, strict=False)
         ):
-            shown = "(" + ", ".join("any" if w is None else str(w) for w in want) + ")"
+            dims = ["any" if w is None else str(w) for w in want]
+            shown = f"({dims[0]},)" if len(dims) == 1 else "(" + ", ".join(dims) + ")"
             raise InputError(f"{path}: array {name!r} has shape {shape}; expected {shown}")
     lengths = {headers[n][0][0] for n, w in wanted.items() if w and w[0] == "N"}
     if len(lengths) > 1:

@@ -8,7 +8,6 @@ loop, the shipped skills.
 
 from __future__ import annotations
 
-import ast
 import json
 import os
 import shutil
@@ -82,7 +81,7 @@ def scenario_file(tmp_path: Path, body: str) -> Path:
 def test_the_ground_action_is_recorded_per_frame_and_cuts_the_recording(recording):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from cake_drake.learning.batches import ColumnDataset
+    from cake_drake.learning.data.batches import ColumnDataset
     from cake_drake.policy.observations import SKILL_SCHEMAS
 
     chunk = {"action": [k / 10 for k in range(10)], "observation.state": [-0.1, 0.0]}
@@ -388,19 +387,3 @@ def test_a_skill_reads_its_action_relative_to_the_hand_and_ends_where_the_classi
     lifted = {**cubes, "a": RigidTransform([0.5, 0.1, pick.z_transit])}
     assert effects_hold(pick, lifted, up, finger=0.019)
     assert not effects_hold(pick, lifted, up, finger=0.04)  # open: not held
-
-
-def test_no_system_of_the_diagram_imports_the_run():
-    """The Diagram's systems know nothing of the run (no circle diagram -> systems ->
-    pipeline/execution -> diagram), nor of the learning code above them."""
-    banned = ("cake_drake.pipeline", "cake_drake.execution", "cake_drake.diagram",
-              "cake_drake.learning", "cake_drake.cli")  # fmt: skip
-    for path in sorted((ROOT / "cake_drake" / "systems").glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            names = []
-            if isinstance(node, ast.ImportFrom) and node.module:
-                names = [node.module]
-            elif isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            for name in names:
-                assert not name.startswith(banned), f"{path.name} imports {name}"

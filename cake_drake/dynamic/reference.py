@@ -22,6 +22,16 @@ from pydrake.trajectories import PiecewisePolynomial
 from cake_drake.errors import InputError
 from cake_drake.formats import load_npz
 
+#: Sizes of the named output ports every reference source has (``WaypointIk``, a learned
+#: skill and the recorded replay alike): what the controller below follows.
+REFERENCE_PORTS = {
+    "desired_state": 14,  # q_d (7), v_d (7)
+    "desired_acceleration": 7,  # a_d
+    "finger_state": 4,  # desired finger state: q1, q2, v1, v2
+    "actions_done": 1,
+    "labels": 2,  # phase index, action index (-1 when idle)
+}
+
 DIFFERENTIATORS = ("spline", "central")
 
 
@@ -141,8 +151,6 @@ class ReferenceTrajectory:
         """``TrajectorySource`` over a first-order hold, exported as the named ports
         ``desired_state``, ``desired_acceleration``, ``finger_state``, ``actions_done`` and
         ``labels`` (the ones ``WaypointIk`` has)."""
-        from cake_drake.systems.waypoint_ik import REFERENCE_PORTS
-
         builder = DiagramBuilder()
         traj = PiecewisePolynomial.FirstOrderHold(self.t, self.matrix())
         source = builder.AddNamedSystem("trajectory", TrajectorySource(traj, 0, True))

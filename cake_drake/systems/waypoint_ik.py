@@ -11,6 +11,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
+from cake_drake.dynamic.reference import REFERENCE_PORTS
 from cake_drake.errors import CakeDrakeError, ExecutionError, IkError
 from cake_drake.geometric.collisions import CollisionChecker
 from cake_drake.geometric.ik import IkSolver
@@ -19,17 +20,6 @@ from cake_drake.geometric.trajectory import JointLimits, JointTrajectory, Timing
 from cake_drake.geometric.waypoints import PICK_ACTIONS, WaypointParams, WorldView
 from cake_drake.symbolic import GroundAction
 from cake_drake.systems.plan_source import ActionCommand, Refusal
-
-#: Sizes of the named output ports every reference source has (``WaypointIk`` and the
-#: recorded replay alike).
-REFERENCE_PORTS = {
-    "desired_state": 14,  # q_d (7), v_d (7)
-    "desired_acceleration": 7,  # a_d
-    "finger_state": 4,  # desired finger state: q1, q2, v1, v2
-    "actions_done": 1,
-    "labels": 2,  # phase index, action index (-1 when idle)
-}
-
 
 #: A critically damped filter of rate w is within 2 % of a step from rest after
 #: SETTLE_RATE / w seconds: (1 + x) exp(-x) = 0.02.
