@@ -32,9 +32,7 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from machine import machine  # noqa: E402
+from machine import machine
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITE = ROOT / "models" / "scenarios" / "learning.yaml"

@@ -40,8 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cake_drake.learning.evaluation import wilson
 
 ENV_ID = "cake_drake.gym:CakeDrake/Stack-v0"
 #: The first step at which a disturbance may start is drawn from this range.
@@ -88,7 +87,7 @@ class ReplayExpert:
     def act(self, observation: dict):
         from pydrake.math import RollPitchYaw
 
-        from cake_drake.learning.expert import measured
+        from cake_drake.learning.policies.expert import measured
         from cake_drake.policy.spaces import EE_STEP, GRIPPER_MAX
 
         step, self.steps = self.steps, self.steps + 1
@@ -117,7 +116,7 @@ def make_expert(which: str):
     """``closed-loop`` (the project's expert) or ``replay`` (:class:`ReplayExpert`)."""
     if which == "replay":
         return ReplayExpert()
-    from cake_drake.learning.expert import make
+    from cake_drake.learning.policies.expert import make
 
     return make()
 
@@ -137,7 +136,7 @@ class Outcome:
 
 def held(obs: dict, cubes) -> str | None:
     """The cube in the hand, read from the observation as the expert and the monitor do."""
-    from cake_drake.learning.expert import measured
+    from cake_drake.learning.policies.expert import measured
     from cake_drake.world.facts import held_cube
 
     m = measured(obs, cubes)
@@ -221,7 +220,7 @@ def timed_expert(**options):
     """The closed-loop expert, its ``act`` timed into :data:`ACT_S` (a policy factory)."""
     import time
 
-    from cake_drake.learning.expert import make
+    from cake_drake.learning.policies.expert import make
 
     expert = make(**options)
     act = expert.act
@@ -238,13 +237,12 @@ def timed_expert(**options):
 
 
 def profile(task: str, episodes: int) -> None:
-    import sys
     import tempfile
     import time
     from dataclasses import replace
 
-    from cake_drake.learning import dataset
-    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.learning.data import dataset
+    from cake_drake.learning.data.recording import spec_from_scenario
     from cake_drake.learning.rollout import rollout
     from cake_drake.scenario import load_scenario
 
@@ -287,17 +285,6 @@ def _one(args) -> Outcome:
         return disturbed_episode(space, seed, make_expert(which), blocks, disturb)
     except Exception as e:  # a failed episode is a row's failure, not the table's end
         return Outcome(seed, False, 0, None, False, f"raised {type(e).__name__}: {e}")
-
-
-def _wilson(k: int, n: int) -> tuple[float, float]:
-    try:
-        from cake_drake.learning.evaluation import wilson
-    except ImportError:
-        try:
-            from cake_drake.learning.recording import wilson
-        except ImportError:
-            from cake_drake.policy.recording import wilson
-    return wilson(k, n)
 
 
 def main() -> None:
@@ -349,7 +336,7 @@ def main() -> None:
         got = outcomes[k * args.episodes : (k + 1) * args.episodes]
         n = len(got)
         wins = sum(o.success for o in got)
-        lo, hi = _wilson(wins, n)
+        lo, hi = wilson(wins, n)
         steps = [o.steps for o in got if o.success]
         kind = "disturbed" if disturb else "clean"
         dropped = sum(o.dropped for o in got)

@@ -21,28 +21,23 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
+from machine import machine  # benchmarks/machine.py
 from pydrake.math import RigidTransform
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from machine import machine  # noqa: E402 - benchmarks/machine.py
-
-from cake_drake.geometric.collisions import CollisionChecker, action_collisions  # noqa: E402
-from cake_drake.geometric.ik import DlsIk, DrakeIk, Kinematics  # noqa: E402
-from cake_drake.geometric.waypoints import (  # noqa: E402
+from cake_drake.geometric.collisions import CollisionChecker, action_collisions
+from cake_drake.geometric.ik import DlsIk, DrakeIk, Kinematics
+from cake_drake.geometric.waypoints import (
     PICK_ACTIONS,
     Waypoint,
     WaypointParams,
     WorldView,
     waypoints_for,
 )
-from cake_drake.symbolic import (  # noqa: E402
+from cake_drake.symbolic import (
     BLOCKSWORLD_DOMAIN,
     PROBLEM_5,
     GroundAction,
@@ -53,7 +48,7 @@ from cake_drake.symbolic import (  # noqa: E402
     solve_problem,
     towers,
 )
-from cake_drake.world.scene import Q_HOME, layout  # noqa: E402
+from cake_drake.world.scene import Q_HOME, layout
 
 PROTOCOL_TOL = 1e-5  # m and rad, as TRAC-IK's published benchmark
 #: Generated problems of the tabletop set: (blocks, seed).

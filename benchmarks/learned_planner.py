@@ -25,21 +25,18 @@ import argparse
 import statistics
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from machine import machine
 
-from machine import machine  # noqa: E402
-
-from cake_drake.errors import CakeDrakeError  # noqa: E402
-from cake_drake.symbolic import (  # noqa: E402
+from cake_drake.errors import CakeDrakeError
+from cake_drake.symbolic import (
     NAMINGS,
     load_domain,
     parse_problem,
     random_problem,
     solve_problem,
 )
-from cake_drake.symbolic.learned import read_problem  # noqa: E402
+from cake_drake.symbolic.learned import read_problem
 
 SIZES = (3, 6, 9, 12, 20, 30, 50)
 PLANNERS = ("learned", "astar-lmcut", "wastar-ff", "gbfs-ff", "fd-lama-first")
@@ -65,7 +62,7 @@ def problems(n: int, count: int):
 
 def exact_length(problem) -> int:
     """The optimal plan length by breadth-first search over every state (small problems)."""
-    from cake_drake.learning.planner import Space
+    from cake_drake.learning.training.planner import Space
 
     _, graph = read_problem(problem)
     space = Space(len(graph.below))

@@ -79,13 +79,11 @@ import sys
 import time
 from pathlib import Path
 
+from machine import machine
+
+from cake_drake.learning.evaluation import wilson
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from machine import machine  # noqa: E402
-
-from cake_drake.learning.evaluation import wilson  # noqa: E402
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 RANDOM = "examples.random_policy:make"
@@ -133,7 +131,8 @@ def cake(command: str, *args: str, peak: dict | None = None) -> float:
 
 def is_skill_checkpoint(policy: str) -> bool:
     """Whether ``policy`` is a training folder of a learned skill."""
-    from cake_drake.learning.checkpoint import _config, is_skill, model_folder
+    from cake_drake.learning.policies.lerobot_checkpoint import is_skill, model_folder
+    from cake_drake.learning.policies.lerobot_checkpoint import read_checkpoint as _config
 
     return Path(policy).is_dir() and is_skill(_config(model_folder(Path(policy))))
 
@@ -232,8 +231,8 @@ def mixed(parts: list[tuple[str, int]], work: Path) -> Path:
     """One dataset of several tasks' demonstrations (``parts``: each task and how many of
     its first seeds), its report the first task's (its spec, its recipe) with every
     episode counted; made once."""
-    from cake_drake.learning import dataset
-    from cake_drake.learning.recording import _load
+    from cake_drake.learning.data import dataset
+    from cake_drake.learning.data.recording import load_episode as _load
 
     tag = "+".join(f"{task}{n}" for task, n in parts)
     out = work / f"{tag}_{recipe_tag(parts[0][0])}"
@@ -289,8 +288,8 @@ def subset(pool: Path, out: Path, frames: int | None = None, seeds_below: int | 
     """A dataset at ``out`` of ``pool``'s kept episodes in seed order: those of seeds below
     ``seeds_below``, or the first whose frames reach ``frames`` (all of them when they do
     not); its report. Made once: an existing ``out`` is kept."""
-    from cake_drake.learning import dataset
-    from cake_drake.learning.recording import _load
+    from cake_drake.learning.data import dataset
+    from cake_drake.learning.data.recording import load_episode as _load
 
     if (out / "report.json").is_file():  # its episodes as made; the recipe as it is now
         report = json.loads((out / "report.json").read_text())
@@ -415,8 +414,8 @@ def skills(args) -> None:
     the cube below, and the simulated time."""
     from dataclasses import replace
 
+    from cake_drake.learning.data.recording import spec_from_scenario
     from cake_drake.learning.evaluation import evaluate as evaluate_here
-    from cake_drake.learning.recording import spec_from_scenario
     from cake_drake.scenario import SKILL_POLICY, load_scenario
 
     shipped = ROOT / "models" / "policies" / "skills"

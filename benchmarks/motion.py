@@ -19,24 +19,19 @@ against ``straight``.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from machine import machine  # benchmarks/machine.py
 from pydrake.math import RigidTransform
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from machine import machine  # noqa: E402 - benchmarks/machine.py
-
-from cake_drake.geometric.free_space import FreeSpace  # noqa: E402
-from cake_drake.geometric.ik import Kinematics, make_solver  # noqa: E402
-from cake_drake.geometric.planners import MoveQuery, ask, make_planner  # noqa: E402
-from cake_drake.geometric.waypoints import gripper_down  # noqa: E402
-from cake_drake.pipeline import run  # noqa: E402
-from cake_drake.scenario import Generate, Scenario  # noqa: E402
-from cake_drake.world.scene import Q_HOME, WorldConfig  # noqa: E402
+from cake_drake.geometric.free_space import FreeSpace
+from cake_drake.geometric.ik import Kinematics, make_solver
+from cake_drake.geometric.planners import MoveQuery, ask, make_planner
+from cake_drake.geometric.waypoints import gripper_down
+from cake_drake.pipeline import run
+from cake_drake.scenario import Generate, Scenario
+from cake_drake.world.scene import Q_HOME, WorldConfig
 
 
 def crowded(problem: Generate | None, planner: str) -> Scenario:

@@ -23,19 +23,14 @@ from __future__ import annotations
 
 import argparse
 import os
-import sys
 import time
-from pathlib import Path
 
+import gymnasium
 import numpy as np
+from machine import machine  # benchmarks/machine.py
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-import gymnasium  # noqa: E402
-from machine import machine  # noqa: E402 - benchmarks/machine.py
-
-from cake_drake.learning.evaluation import wilson  # noqa: E402
-from cake_drake.world.cameras import renderer_line  # noqa: E402
+from cake_drake.learning.evaluation import wilson
+from cake_drake.world.cameras import renderer_line
 
 ENV_ID = "cake_drake.gym:CakeDrake/Stack-v0"
 CHUNK = {"horizon": 10, "execute": 5}
@@ -137,9 +132,9 @@ def vector_speed(n: int, steps: int) -> float:
 def success(
     policy: str, seeds: int, mode: str = "ee_delta", max_steps: int = 2000
 ) -> tuple[list[bool], list[int]]:
-    import importlib
+    from cake_drake.plugins import load_attribute  # the plug-in door finds examples/ here
 
-    make = importlib.import_module(f"examples.{policy}").make
+    make = load_attribute(f"examples.{policy}:make", "policy")
     won, steps = [], []
     for seed in range(seeds):
         env = gymnasium.make(ENV_ID, blocks=(3, 8), control_mode=mode, max_steps=max_steps)

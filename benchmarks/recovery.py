@@ -19,12 +19,11 @@ from pathlib import Path
 
 from machine import machine  # benchmarks/machine.py
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from cake_drake.pipeline import run
+from cake_drake.scenario import Scenario
+from cake_drake.sweeps import LocalPool, RayCluster, load_sweep, read_table, run_sweep
 
-from cake_drake.pipeline import run  # noqa: E402
-from cake_drake.scenario import Scenario  # noqa: E402
-from cake_drake.sweeps import LocalPool, RayCluster, load_sweep, read_table, run_sweep  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 SWEEP = ROOT / "models" / "sweeps" / "recovery.yaml"
 

@@ -25,23 +25,19 @@ from __future__ import annotations
 
 import argparse
 import shutil
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from machine import machine
+
+from cake_drake.dynamic.residual import HOLD, from_mass
+from cake_drake.formats import PHASE_NAMES
+from cake_drake.learning.training.residual import describe, train_residual
+from cake_drake.pipeline import run
+from cake_drake.scenario import ComputedTorque, Generate, Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from machine import machine  # noqa: E402
-
-from cake_drake.dynamic.residual import HOLD, from_mass  # noqa: E402
-from cake_drake.formats import PHASE_NAMES  # noqa: E402
-from cake_drake.learning.residual import describe, train_residual  # noqa: E402
-from cake_drake.pipeline import run  # noqa: E402
-from cake_drake.scenario import ComputedTorque, Generate, Scenario  # noqa: E402
 
 MASS = 0.5
 KI = 200.0

@@ -23,25 +23,21 @@ from __future__ import annotations
 
 import argparse
 import csv
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from machine import machine
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from machine import machine  # noqa: E402
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 PIXELS = ROOT / "models" / "policies" / "stack2_pixels"
 
 
 def _spec(cameras: bool):
-    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.learning.data.recording import spec_from_scenario
     from cake_drake.scenario import load_scenario
 
     spec = spec_from_scenario(load_scenario(LEARNING, "stack2"))
@@ -88,7 +84,7 @@ def throughput(steps: int) -> None:
         rate = 2 * (steps // 2) / (time.perf_counter() - t0)
         venv.close()
         print(f"  {what:<22} make_vec x 2     {rate:7.0f} steps/s")
-    from cake_drake.learning.checkpoint import CheckpointPolicy
+    from cake_drake.learning.policies.lerobot_checkpoint import CheckpointPolicy
 
     env = _make(True)
     obs, _ = env.reset(seed=1)
@@ -105,13 +101,13 @@ def throughput(steps: int) -> None:
 
 
 def _evaluate(path: Path, seeds: list[int], workers: int) -> dict:
+    from cake_drake.learning.data.recording import spec_from_scenario
     from cake_drake.learning.evaluation import evaluate
-    from cake_drake.learning.recording import spec_from_scenario
     from cake_drake.scenario import CHECKPOINT_POLICY, load_scenario
 
     scenario = load_scenario(LEARNING, "stack2")
     spec = spec_from_scenario(scenario)
-    from cake_drake.learning.checkpoint import check_folder, sees
+    from cake_drake.learning.policies.checkpoint import check_folder, sees
 
     check_folder(path, spec.control_mode, "cpu", scenario.cameras)
     cameras = tuple(c for c in spec.cameras if c.name in sees(path))
@@ -133,7 +129,7 @@ def _row(label: str, summary: dict, trained: str = "") -> str:
 
 def compare(folders: list[Path], seeds: list[int], workers: int) -> dict[str, float]:
     """Each folder's row (and its base's, once); the bases' success rates by name."""
-    from cake_drake.learning.rl import KIND_LABELS, read_rl
+    from cake_drake.learning.policies.rl import KIND_LABELS, read_rl
     from cake_drake.scenario import resolve_path
 
     print(f"stack2, held-out seeds {seeds[0]}..{seeds[-1]}: success (95 % interval), mean "
@@ -162,7 +158,7 @@ def figure(folders: list[Path], path: Path, bases: dict[str, float], window: int
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from cake_drake.learning.rl import KIND_LABELS, PROGRESS, read_rl
+    from cake_drake.learning.policies.rl import KIND_LABELS, PROGRESS, read_rl
 
     fig, ax = plt.subplots(figsize=(7.5, 4.2), dpi=100)
     for k, folder in enumerate(folders):

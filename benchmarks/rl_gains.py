@@ -18,20 +18,16 @@ and with the learned residual (``models/residuals/cubes_0.5kg``).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from machine import machine
+from residual import HELD_OUT, TRAIN, metrics, scenario
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from machine import machine  # noqa: E402
-from residual import HELD_OUT, TRAIN, metrics, scenario  # noqa: E402
 
 RESIDUAL = ROOT / "models" / "residuals" / "cubes_0.5kg"
 KP, KD, RANGE = 100.0, 20.0, 4.0

@@ -20,14 +20,12 @@ Prints the episode's verdict. ``--seed`` a failing seed draws a failure.
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 SHIPPED = ROOT / "models" / "policies" / "stack2_pixels"
@@ -58,7 +56,7 @@ def main() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.learning.data.recording import spec_from_scenario
     from cake_drake.learning.rollout import rollout
     from cake_drake.scenario import CHECKPOINT_POLICY, load_scenario
 

@@ -16,16 +16,12 @@ draws the elbow's torque of the first episode under each setting, one above the 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
+from machine import machine
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from machine import machine  # noqa: E402
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 ELBOW = 3  # joint 4
@@ -33,7 +29,7 @@ ELBOW = 3  # joint 4
 
 def episode(seed: int, smooth_s: float):
     """One learned_tower5 episode: its placement drawn from ``seed`` as evaluate's is."""
-    from cake_drake.learning.recording import spec_from_scenario
+    from cake_drake.learning.data.recording import spec_from_scenario
     from cake_drake.pipeline import run
     from cake_drake.scenario import load_scenario
 

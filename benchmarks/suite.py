@@ -31,9 +31,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from machine import machine  # noqa: E402 - benchmarks/machine.py
+from machine import machine  # benchmarks/machine.py
 
 COLUMNS = (
     "n", "seed", "naming", "planner", "plan", "planning s", "simulated s", "wall s",

@@ -23,11 +23,10 @@ from pathlib import Path
 
 from machine import machine  # benchmarks/machine.py
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from cake_drake.sweeps import read_table
+from cake_drake.sweeps.worker import TIMINGS
 
-from cake_drake.sweeps import read_table  # noqa: E402
-from cake_drake.sweeps.worker import TIMINGS  # noqa: E402
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _cpu() -> float:

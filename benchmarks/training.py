@@ -5,7 +5,7 @@ once into ``--work``, with the task's cameras unless ``--no-cameras``) and the t
 recipe (``models/scenarios/learning.yaml``; ``--steps`` overrides its length), prints:
 
 - loading: LeRobot's own dataset per sample (the policy's keys, with its
-  ``delta_timestamps``) against the columns in memory (``cake_drake.learning.batches``):
+  ``delta_timestamps``) against the columns in memory (``cake_drake.learning.data.batches``):
   the time to read the recording once, and per sample;
 - the network alone: the recipe's policy, its forward, backward and AdamW step on a batch
   already in memory, on the threads ``train`` gives it: steps/s;
@@ -31,11 +31,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "benchmarks"))
+from machine import machine
 
-from machine import machine  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 
@@ -66,7 +64,7 @@ def lerobot_dataset(data: Path, config):
     from lerobot.datasets.factory import resolve_delta_timestamps
     from lerobot.datasets.lerobot_dataset import LeRobotDataset, LeRobotDatasetMetadata
 
-    from cake_drake.learning.dataset import REPO_ID
+    from cake_drake.learning.data.dataset import REPO_ID
 
     meta = LeRobotDatasetMetadata(REPO_ID, root=data)
     deltas = resolve_delta_timestamps(config, meta)
@@ -114,8 +112,8 @@ def main() -> None:
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     import torch
 
-    from cake_drake.learning import train as training
-    from cake_drake.learning.batches import ColumnDataset
+    from cake_drake.learning.data.batches import ColumnDataset
+    from cake_drake.learning.training import train as training
     from cake_drake.scenario import load_scenario
 
     print(machine())
@@ -123,7 +121,7 @@ def main() -> None:
     recipe = training.for_inputs(load_scenario(LEARNING, args.task).training, args.inputs)
     steps = args.steps or recipe.steps
     keys = training.check(data, Path(tempfile.mkdtemp()) / "x", recipe, "cpu", False)
-    import cake_drake.learning.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
+    import cake_drake.learning.policies.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
 
     config = training._policy_config(recipe, "cpu", None)
     base = lerobot_dataset(data, config)

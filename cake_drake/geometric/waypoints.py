@@ -119,7 +119,10 @@ def _lowest(X_WB: RigidTransform) -> float:
     return float(X_WB.translation()[2] - CUBE_SIZE / 2 * np.sum(np.abs(R[2, :])))
 
 
-def _yaw(X: RigidTransform) -> float:
+def yaw_of(X: RigidTransform) -> float:
+    """A frame's yaw about world z (rad): the hand's, a target's. The one place it is
+    computed: the waypoints, the skills' observations and the hand-frame action space
+    read it alike."""
     return float(RollPitchYaw(X.rotation()).yaw_angle())
 
 
@@ -196,12 +199,12 @@ def waypoints_for(
         # Cube yaw that is a quarter turn of the target's, with the gripper yaw nearest
         # to the comfortable one.
         preferred = math.atan2(target[1], target[0]) + params.yaw_turns * math.pi / 2
-        grip_minus_cube = _yaw(world.X_WG) - face_yaw(poses[block]) if in_hand else 0.0
+        grip_minus_cube = yaw_of(world.X_WG) - face_yaw(poses[block]) if in_hand else 0.0
         cube_yaw = _nearest_turn(target_yaw, preferred - grip_minus_cube)
         X_WB_target = RigidTransform(RotationMatrix.MakeZRotation(cube_yaw), target)
         X_place = X_WB_target @ X_GB.inverse()
         # Keep the gripper pointing straight down even if the cube tilted in the hand.
-        R = gripper_down(_yaw(X_place))
+        R = gripper_down(yaw_of(X_place))
         X_place = RigidTransform(R, X_place.translation())
         # A cube tilted in the hand: released with its lowest corner where the flat cube's
         # face would be (it then falls flat), not pressed into its support.

@@ -67,7 +67,13 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.math import RigidTransform
 
-from cake_drake.geometric.waypoints import WaypointParams, face_yaw, free_slot, transit_height
+from cake_drake.geometric.waypoints import (
+    WaypointParams,
+    face_yaw,
+    free_slot,
+    transit_height,
+    yaw_of,
+)
 from cake_drake.symbolic import fact_str
 from cake_drake.world.scene import CUBE_SIZE
 
@@ -175,11 +181,6 @@ def _quarter(angle: float) -> float:
     return float((angle + np.pi / 4) % (np.pi / 2) - np.pi / 4)
 
 
-def _yaw(X: RigidTransform) -> float:
-    R = X.rotation().matrix()
-    return float(np.arctan2(R[1, 0], R[0, 0]))
-
-
 def skill_context(action, cubes: Mapping[str, RigidTransform], slots, params=None) -> SkillContext:
     """The targets of ``action`` (in the exercise's names, see ``SKILL_SCHEMAS``) from the
     world measured as it starts: the classical layer's own (its free slot, the lower
@@ -209,7 +210,7 @@ def skill_vector(
 ) -> np.ndarray:
     """``observation.skill`` (see the module's table) from the measured poses now."""
     p_G = X_WG.translation()
-    hand_yaw = _yaw(X_WG)
+    hand_yaw = yaw_of(X_WG)
     X_cube = cubes[context.cube]
     out = np.zeros(SKILL_SIZE, np.float32)
     out[SKILL_SCHEMAS.index(context.schema)] = 1.0

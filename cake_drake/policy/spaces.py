@@ -29,6 +29,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from cake_drake.errors import InputError
+from cake_drake.geometric.waypoints import yaw_of
 from cake_drake.plugins import DURING, PluginError
 
 GRIPPER_MAX = 0.08  # m between the fingers, fully open
@@ -188,8 +189,7 @@ def ee_target(
     turned by its measured yaw plus ``delta``'s dyaw (droll and dpitch unused): a top-down
     hand whose tilt cannot drift from step to step."""
     if down:
-        R = X_WG.rotation().matrix()
-        yaw = float(np.arctan2(R[1, 0], R[0, 0])) + float(delta[5])
+        yaw = yaw_of(X_WG) + float(delta[5])
         R = RotationMatrix.MakeZRotation(yaw).multiply(RotationMatrix.MakeXRotation(np.pi))
     else:
         R = RollPitchYaw(delta[3:6]).ToRotationMatrix().multiply(X_WG.rotation())
