@@ -107,9 +107,11 @@ def detect(path: str | Path) -> Kind:
             return KINDS[name]
     folder = lerobot_folder(path)
     if folder is None:
-        raise InputError(f"{path}: not a LeRobot checkpoint (no config.json and "
-                         "model.safetensors here, nor in checkpoints/last/pretrained_model), "
-                         "nor another learned part (rl.json, planner.json, residual.json)")  # fmt: skip
+        raise InputError(
+            f"{path}: not a LeRobot checkpoint (no config.json and model.safetensors here, "
+            "nor in checkpoints/last/pretrained_model), nor another learned part (rl.json, "
+            "planner.json, residual.json)"
+        )
     config = read_json_mapping(folder / "config.json", "a LeRobot policy's config")
     inputs = config.get("input_features")
     return KINDS["skill" if isinstance(inputs, dict) and "observation.skill" in inputs
