@@ -17,7 +17,6 @@ import sys
 from dataclasses import dataclass
 
 from cake_drake.errors import CakeDrakeError
-from cake_drake.sweeps.pool import spawn_imap
 
 
 @dataclass
@@ -64,6 +63,10 @@ def imap(fn, jobs, workers: int, ray=None):
     elif workers <= 1 or len(jobs) <= 1:
         yield from (fn(j) for j in jobs)
     else:
+        # Loaded here, not at import: the sweeps package draws its tables with matplotlib
+        # (about 0.5 s), which a process that evaluates or records in-process never needs.
+        from cake_drake.sweeps.pool import spawn_imap
+
         workers = min(workers, len(jobs))
         threads = max(1, len(os.sched_getaffinity(0)) // workers)
         answers = spawn_imap(_guarded_call, [(fn, j, threads) for j in jobs], workers)
