@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cake_drake import artifacts
 from cake_drake.errors import InputError
 from cake_drake.formats import read_json_mapping
 from cake_drake.learning.data.dataset import require_lerobot
@@ -41,13 +42,9 @@ def model_folder(path: Path) -> Path:
     """The folder with the policy's ``config.json`` and weights: ``path`` itself, or the
     last checkpoint of a training folder (``checkpoints/last/pretrained_model``)."""
     path = Path(path)
-    for candidate in (
-        path,
-        path / "pretrained_model",
-        path / "checkpoints" / "last" / "pretrained_model",
-    ):
-        if (candidate / "config.json").is_file() and (candidate / "model.safetensors").is_file():
-            return candidate
+    folder = artifacts.lerobot_folder(path)
+    if folder is not None:
+        return folder
     if not path.exists():
         raise InputError(f"{path}: no such checkpoint folder")
     raise InputError(
