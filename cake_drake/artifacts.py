@@ -13,8 +13,11 @@ planner    ``planner.json``,               the symbolic layer's planner
            ``weights.npz``
 residual   ``residual.json``               a residual torque beside computed torque
 skill      a LeRobot checkpoint whose      the geometric layer (a skill per ground
-           inputs name ``observation.      action, under the planner)
-           skill``
+           inputs name ``observation.      action, under the planner), reading the
+           skill``                         arm's joints
+relative_  ``skill.json``,                 the geometric layer, never seeing the arm
+skill      ``weights.npz``                 (hand moves with IK below, the gripper as
+                                           a decision)
 policy     any other LeRobot checkpoint    the symbolic and geometric layers (a
            (``config.json``,               whole-task policy)
            ``model.safetensors``)
@@ -70,6 +73,9 @@ KINDS: dict[str, Kind] = {
         Kind("skill", "a learned skill (a checkpoint reading observation.skill)", "geometric",
              f"{_POLICIES}.skills:check_folder", f"{_POLICIES}.skills:make",
              f"{_POLICIES}.skills:describe"),
+        Kind("relative_skill", "a skill that never sees the arm (skill.json)", "geometric",
+             f"{_POLICIES}.relative_skill:check_folder", f"{_POLICIES}.relative_skill:make",
+             f"{_POLICIES}.relative_skill:describe"),
         Kind("policy", "a whole-task policy (a LeRobot checkpoint)", "symbolic + geometric",
              f"{_POLICIES}.lerobot_checkpoint:check_folder",
              f"{_POLICIES}.lerobot_checkpoint:CheckpointPolicy",
@@ -78,7 +84,10 @@ KINDS: dict[str, Kind] = {
 }  # fmt: skip
 
 #: The file that says a folder is of a kind, for the kinds that have one of their own.
-MARKERS = {"rl": "rl.json", "planner": "planner.json", "residual": "residual.json"}
+MARKERS = {"rl": "rl.json", "planner": "planner.json", "residual": "residual.json",
+           "relative_skill": "skill.json"}  # fmt: skip
+#: The kinds that are the geometric layer (``motion.skills``, ``evaluate``'s skills).
+SKILL_KINDS = ("skill", "relative_skill")
 
 
 def lerobot_folder(path: Path) -> Path | None:
@@ -110,7 +119,7 @@ def detect(path: str | Path) -> Kind:
         raise InputError(
             f"{path}: not a LeRobot checkpoint (no config.json and model.safetensors here, "
             "nor in checkpoints/last/pretrained_model), nor another learned part (rl.json, "
-            "planner.json, residual.json)"
+            "planner.json, residual.json, skill.json)"
         )
     config = read_json_mapping(folder / "config.json", "a LeRobot policy's config")
     inputs = config.get("input_features")
@@ -157,7 +166,18 @@ def describe(path: str | Path) -> str:
 
 def _kinds_said() -> str:
     return ("rl.json (RL), planner.json (a learned planner), residual.json (a residual), "
-            "or a LeRobot checkpoint: config.json and model.safetensors")  # fmt: skip
+            "skill.json (a skill that never sees the arm), or a LeRobot checkpoint: "
+            "config.json and model.safetensors")  # fmt: skip
 
 
-__all__ = ["KINDS", "Kind", "check", "describe", "detect", "kind_of", "load", "require"]
+__all__ = [
+    "KINDS",
+    "SKILL_KINDS",
+    "Kind",
+    "check",
+    "describe",
+    "detect",
+    "kind_of",
+    "load",
+    "require",
+]

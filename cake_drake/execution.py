@@ -207,7 +207,7 @@ def execute(
     simulator.set_target_realtime_rate(cake.scenario.visualization.realtime_rate)
     context = simulator.get_mutable_context()
     plant_context = cake.scene.plant.GetMyMutableContextFromRoot(context)
-    set_world_parameters(cake.scene, plant_context, cake.scenario.world)
+    set_world_parameters(cake.scene, plant_context, cake.scenario.world, cake.scenario.seed)
     specs = plugin_specs(cake.scenario)
     step_budget = cake.scenario.simulation.step_budget_s
 

@@ -140,6 +140,18 @@ def _check_numbers(s: Scenario) -> None:
     _range(w.finger_kp, 1e-3, 1e6, "world.finger_kp", " N/m")
     _range(w.finger_kd, 0.0, 1e5, "world.finger_kd", " N s/m")
     _range(w.cube_mass_kg, 0.01, 1.0, "world.cube_mass_kg", " kg")
+    if w.cube_mass_range_kg:
+        where = "world.cube_mass_range_kg"
+        if len(w.cube_mass_range_kg) != 2:
+            raise InputError(
+                f"{where} has {len(w.cube_mass_range_kg)} numbers; give two, [lo, hi] kg"
+            )
+        for mass in w.cube_mass_range_kg:
+            _range(mass, 0.01, 1.0, where, " kg")
+        if w.cube_mass_range_kg[0] > w.cube_mass_range_kg[1]:
+            raise InputError(
+                f"{where} = {list(w.cube_mass_range_kg)}: lo above hi; give [lo, hi] kg"
+            )
     _range(w.payload_kg, 0.0, 2.0, "world.payload_kg", " kg")
     for f in per_joint(w.joint_friction, "world.joint_friction"):
         _range(f, 0.0, 5.0, "world.joint_friction", " N m s/rad")
@@ -318,10 +330,10 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
 def check_skill_settings(motion) -> None:
     """The learned skills' settings, checked whether or not ``motion.skills`` names a
     checkpoint: every number of a scenario is checked before any work, read or not."""
-    if motion.skill_action_space not in ("", "joint_position", "ee_delta"):
+    if motion.skill_action_space not in ("", "joint_position", "ee_delta", "relative"):
         raise InputError(
             f"motion.skill_action_space: {motion.skill_action_space!r}; one of joint_position, "
-            "ee_delta, or empty (the checkpoint's own)"
+            "ee_delta, relative (a skill that never sees the arm), or empty (the skill's own)"
         )
     _range(motion.skill_rate_hz, 0.5, 100.0, "motion.skill_rate_hz", " Hz")
     _range(motion.skill_smooth_s, 0.0, 5.0, "motion.skill_smooth_s", " s")

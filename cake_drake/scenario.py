@@ -110,8 +110,9 @@ class Motion:
     #: (0: 150, 15 s at 10 Hz).
     skill_max_steps: int = 0
     skill_device: str = "cpu"  # where the skill runs: cpu | cuda | auto
-    #: What the skill answers in (joint_position | ee_delta); empty: what its checkpoint
-    #: was trained on. A checkpoint of another space is refused before anything runs.
+    #: What the skill answers in (joint_position | ee_delta), or ``relative``: a skill that
+    #: never sees the arm (skill.json); empty: what its folder holds. A skill of another
+    #: kind or space is refused before anything runs.
     skill_action_space: str = ""
     #: The skill's joint targets reach the controller through a critically damped filter
     #: that settles on each in about this many seconds, continuous in position and
@@ -276,7 +277,7 @@ class Training:
     reads, how long it trains and how big its network is (data, not code)."""
 
     policy: str = "act"  # act | diffusion | mlp
-    inputs: str = "state"  # state | images | both | skill
+    inputs: str = "state"  # state | images | both | skill | relative
     steps: int = 20000
     batch_size: int = 64
     lr: float = 1e-4
@@ -376,6 +377,7 @@ CHECKPOINT_CHECK = "cake_drake.learning.checkpoint:check_folder"
 CHECKPOINT_DESCRIBE = "cake_drake.learning.checkpoint:describe"
 SKILL_POLICY = "cake_drake.learning.skills:make"
 SKILL_CHECK = "cake_drake.learning.skills:check_folder"
+SKILL_DESCRIBE = "cake_drake.learning.skills:describe"
 
 
 def _scenario_paths(scenario: Scenario):

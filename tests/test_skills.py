@@ -165,6 +165,46 @@ short:
     assert json.loads((tmp_path / "eval" / "summary.json").read_text())["episodes"] == 1
 
 
+def test_a_relative_skill_trained_a_few_steps_runs_under_the_planner_and_in_evaluate(
+    hand_skill, tmp_path
+):
+    """The recording of the hand's moves trains a skill that never sees the arm
+    (--inputs relative); it runs as the geometric layer and in evaluate, and the run's
+    layers say what it reads and answers."""
+    out = tmp_path / "relative"
+    r = cli("cake_drake.train", str(hand_skill.parent / "ds"), "--inputs", "relative",
+            "--steps", "50", "--batch-size", "32", "--out", str(out))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "relative skill trained 50 steps" in r.stdout
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == [
+        "skill.json",
+        "weights.npz",
+    ]
+    path = scenario_file(tmp_path, f"""
+short:
+  task: {{problem: "package://cake_drake/pddl/stack2.pddl"}}
+  motion: {{skills: "{out}", skill_max_steps: 15, skill_action_space: relative}}
+  simulation: {{max_sim_s: 6.0}}
+  outputs: {{render: false}}
+""")  # fmt: skip
+    run = tmp_path / "run"
+    r = cli("cake_drake.run", "--scenario", str(path), "--name", "short", "--out", str(run))
+    assert r.returncode in (0, 3), r.stderr  # 50 steps may or may not pick the cube
+    summary = json.loads((run / "summary.json").read_text())
+    geometric = summary["layers"]["geometric"]
+    assert geometric["kind"] == "learned"
+    assert "reads the action from the hand, never the arm" in geometric["what"]
+    assert "hand moves (IK below) and the gripper as a decision" in geometric["what"]
+    assert summary["skills"]["action_space"] == "ee_delta" and summary["skills"]["steps"] > 0
+    q = np.load(run / "trajectory.npz")["q"]
+    assert np.abs(q[-1] - q[0]).max() > 1e-3  # the hand moved, IK below turning it into joints
+    r = cli("cake_drake.evaluate", str(out), "--suite", str(LEARNING), "--name",
+            "stack2", "--episodes", "1", "--seed", "100000", "--workers", "1", "--out",
+            str(tmp_path / "eval"))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "eval" / "summary.json").read_text())["episodes"] == 1
+
+
 def test_a_skill_run_as_another_action_space_is_refused_before_simulating(
     skill, hand_skill, tmp_path
 ):

@@ -79,11 +79,13 @@ def main_evaluate(argv: list[str] | None = None) -> int:
     # The folder's kind, decided once (cake_drake.artifacts): what evaluate runs is a
     # whole-task policy (imitation or RL) or learned skills, never a planner or residual.
     kind = (
-        artifacts.require(args.policy, "policy", "rl", "skill", role="what evaluate runs")
+        artifacts.require(
+            args.policy, "policy", "rl", *artifacts.SKILL_KINDS, role="what evaluate runs"
+        )  # fmt: skip
         if checkpoint
         else None
     )
-    skills = kind is not None and kind.name == "skill"
+    skills = kind is not None and kind.name in artifacts.SKILL_KINDS
     if skills and args.frames:
         raise InputError(
             f"--frames {args.frames}: learned skills run whole runs under the planner; "

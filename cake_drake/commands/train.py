@@ -28,7 +28,10 @@ Policy, trained with the recipe's part for them where the recipe trains another 
 joints and observation.environment_state (the cubes' poses and the goal); images the
 joints and the cameras (mlp: a small encoder a camera, and the goal without the poses;
 both train on a CPU, ACT's and Diffusion Policy's image encoders are GPU work); both all
-of them (act, diffusion); skill a learned skill.
+of them (act, diffusion); skill a learned skill; relative a skill that never sees the
+arm (observation.relative: the action from the hand, the gripper's width, the time in
+the action; it answers hand moves and the gripper as a decision, trained on the CPU into
+OUT/skill.json and OUT/weights.npz, on a recording of the hand's moves).
 Nothing is downloaded: the dataset is read from its folder and backbones start from
 scratch unless --weights names a file. The checkpoint is LeRobot's
 (OUT/checkpoints/last/pretrained_model): evaluate it with python -m cake_drake.evaluate
@@ -132,7 +135,9 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--algorithm", help="--rl: ppo | sac (default: the recipe's)")
     p.add_argument("--envs", type=int, help="--rl: environments side by side (default: recipe's)")
     p.add_argument("--policy", help="mlp | act | diffusion (default: the recipe's)")
-    p.add_argument("--inputs", help="state | images | both | skill (default: the recipe's)")
+    p.add_argument(
+        "--inputs", help="state | images | both | skill | relative (default: the recipe's)"
+    )
     p.add_argument(
         "--cameras",
         nargs="+",
@@ -243,6 +248,8 @@ def _main_policy(args: argparse.Namespace) -> int:
         recipe = replace(recipe, images=replace(recipe.images, cameras=list(args.cameras)))
     if args.weights is not None and not Path(args.weights).is_file():
         raise InputError(f"--weights {args.weights}: no such file")
+    if recipe.inputs == "relative":
+        return _main_relative(args, recipe)
     if args.dagger is not None:
         return _main_dagger(args, recipe)
     folder = train(
@@ -251,6 +258,39 @@ def _main_policy(args: argparse.Namespace) -> int:
     print(
         f"{args.out}: {recipe.policy} ({recipe.inputs}) trained {recipe.steps} steps on "
         f"{args.dataset}; checkpoint {folder}"
+    )
+    return EXIT_OK
+
+
+def _main_relative(args: argparse.Namespace, recipe) -> int:
+    """A skill that never sees the arm, trained on the recording of the hand's moves."""
+    from cake_drake.learning.training.relative_skill import FILES, train_relative
+    from cake_drake.outputs.files import OutputDir
+
+    unread = [f for f in ("dagger", "resume", "weights", "cameras") if getattr(args, f)]
+    if recipe.policy != "mlp" or unread:
+        what = f"--{unread[0]}" if unread else f"--policy {recipe.policy}"
+        raise InputError(f"{what} with --inputs relative: a relative skill is a perceptron "
+                         "trained on the CPU from its recording alone")  # fmt: skip
+    if args.device not in ("auto", "cpu"):
+        raise InputError(f"--device {args.device} with --inputs relative: it trains on the CPU")
+    with OutputDir(args.out, "train", FILES, [args.dataset]) as staged:
+        info = train_relative(
+            Path(args.dataset),
+            staged,
+            recipe.steps,
+            recipe.batch_size,
+            recipe.lr or 1e-3,
+            list(recipe.hidden_dims),
+            recipe.n_obs_steps,
+            args.seed,
+            progress=lambda line: print(line, flush=True),
+        )
+        staged.commit()
+    print(
+        f"{args.out}: relative skill trained {recipe.steps} steps on {info['frames']} frames "
+        f"of {args.dataset} in {info['minutes']:.1f} min (gripper decided right on "
+        f"{100 * info['gripper_accuracy']:.1f} % of them); run it with motion.skills: {args.out}"
     )
     return EXIT_OK
 

@@ -96,6 +96,8 @@ class EpisodeSpec:
     options: dict = field(default_factory=dict)  # the policy's factory's keyword arguments
     placement: tuple[float, float] = (0.0, 0.0)  # world.placement: xy (m), yaw (degrees)
     tall: bool = False  # generated problems of few, tall towers (task.generate.tall)
+    cube_mass_range_kg: tuple = ()  # world.cube_mass_range_kg: (lo, hi) kg, drawn per episode
+    controller: object = None  # the task's controller (a scenario's), None: the default
     noise: float = 0.0  # DART: noise added to the executed action (units: noise_scale)
     act_budget_s: float = ACT_BUDGET_S  # wall-clock budget of one answer of the policy
 
@@ -114,6 +116,8 @@ class EpisodeSpec:
             options=self.action_options(),
             placement=self.placement,
             tall=self.tall,
+            cube_mass_range_kg=self.cube_mass_range_kg,
+            controller=self.controller,
         )
 
     @property

@@ -49,7 +49,7 @@ def layers(scenario, plan) -> dict:
     label the chapter asks a student to put on every layer of a system."""
     from cake_drake.paths import resolve_path
     from cake_drake.plugins import load_attribute
-    from cake_drake.scenario import CHECKPOINT_DESCRIBE, Policy, Recorded
+    from cake_drake.scenario import CHECKPOINT_DESCRIBE, SKILL_DESCRIBE, Policy, Recorded
     from cake_drake.symbolic.learned import is_learned
 
     reference, motion = scenario.reference, scenario.motion
@@ -69,8 +69,10 @@ def layers(scenario, plan) -> dict:
             symbolic = {"kind": "classical", "what": planner}
         if isinstance(reference, Recorded):
             geometric = {"kind": "classical", "what": f"a recorded trajectory ({reference.path})"}
-        elif motion.skills:
-            geometric = {"kind": "learned", "what": f"skills ({motion.skills})"}
+        elif motion.skills:  # what the skills read and answer, said by their adapter
+            describe = load_attribute(SKILL_DESCRIBE, "skill")
+            how = describe(resolve_path(motion.skills))
+            geometric = {"kind": "learned", "what": f"skills, {how} ({motion.skills})"}
         else:
             moves = f"waypoints, IK ({motion.ik}), {motion.planner} moves"
             geometric = {"kind": "classical", "what": moves}

@@ -54,6 +54,19 @@ numbers   ``observation.skill`` (float32, 13)
 12        the transit height minus the grasp frame's height (m)
 ========= ======================================================================
 
+A skill that never sees the arm reads ``observation.relative`` instead of
+``observation.state`` (:func:`relative_vector`): nothing of the arm's joints and no
+absolute height, so the same action in a scene moved up by whole cubes, or across the
+table, reads the same numbers:
+
+========= ======================================================================
+numbers   ``observation.relative`` (float32, 15)
+========= ======================================================================
+0-12      ``observation.skill``, as above
+13        the gripper's measured width (m)
+14        the time since the action began (s)
+========= ======================================================================
+
 ``ground_action`` (int64, 4) says per frame which ground action it is: the schema's
 index (-1: none under way), the cubes' indices in ``cubes`` (-1: none), and the action's
 place in the plan; a recording is cut into per-action segments where it changes.
@@ -89,6 +102,8 @@ GOAL_START = MAX_CUBES * 7
 #: The ground actions a skill executes, by what they do (the exercise's names).
 SKILL_SCHEMAS = ("pick-up", "unstack", "put-down", "stack")
 SKILL_SIZE = 13
+#: ``observation.relative``: the skill's numbers, the gripper's width, time in the action.
+RELATIVE_SIZE = SKILL_SIZE + 2
 #: The frame's ground action: schema, moved cube, other cube, the action's place in the plan.
 GROUND_ACTION_SIZE = 4
 NO_GROUND_ACTION = np.full(GROUND_ACTION_SIZE, -1, np.int64)
@@ -226,6 +241,16 @@ def skill_vector(
         out[11] = _quarter(context.target_yaw - hand_yaw)
     out[8:11] = target - p_G
     out[12] = context.z_transit - p_G[2]
+    return out
+
+
+def relative_vector(skill: np.ndarray, width: float, seconds: float) -> np.ndarray:
+    """``observation.relative`` (see the module's table): ``skill`` (:func:`skill_vector`),
+    the gripper's measured ``width`` (m) and the ``seconds`` since the action began."""
+    out = np.empty(RELATIVE_SIZE, np.float32)
+    out[:SKILL_SIZE] = skill
+    out[SKILL_SIZE] = width
+    out[SKILL_SIZE + 1] = seconds
     return out
 
 

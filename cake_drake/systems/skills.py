@@ -21,11 +21,13 @@ The same ports as :class:`~cake_drake.systems.waypoint_ik.WaypointIk`: the actio
 would compute waypoints and IK, a learned skill is asked every ``1 / rate_hz`` simulated
 seconds for its action, from the joints and the action's own numbers (``observation.skill``:
 :func:`cake_drake.policy.observations.skill_vector`, its targets fixed when the action
-starts as the classical layer fixes its waypoints). The skill is any object with
-``reset()`` (a new action: no history) and ``act(observation)``; a checkpoint's adapter
-is made through the plug-in door, so nothing here imports the learning code. Its
-``action_space`` (an attribute, default ``joint_position``) says what it answers
-(:mod:`cake_drake.policy.spaces`):
+starts as the classical layer fixes its waypoints), or, for a skill that never sees the
+arm, from those numbers, the gripper's width and the time in the action alone
+(``observation.relative``: :func:`cake_drake.policy.observations.relative_vector`).
+The skill is any object with ``reset()`` (a new action: no history) and
+``act(observation)``; a checkpoint's adapter is made through the plug-in door, so
+nothing here imports the learning code. Its ``action_space`` (an attribute, default
+``joint_position``) says what it answers (:mod:`cake_drake.policy.spaces`):
 
 - ``joint_position``: 8 numbers, the arm's seven joint targets and the gripper's width;
 - ``ee_delta``: 7 numbers, a move of the grasp frame from where it is measured (dx dy dz
@@ -66,7 +68,12 @@ from pydrake.systems.framework import LeafSystem
 from cake_drake.errors import ExecutionError
 from cake_drake.plugins import DURING, guarded
 from cake_drake.policy import spaces
-from cake_drake.policy.observations import SkillContext, skill_context, skill_vector
+from cake_drake.policy.observations import (
+    SkillContext,
+    relative_vector,
+    skill_context,
+    skill_vector,
+)
 from cake_drake.scenario import ACT_BUDGET_S
 from cake_drake.symbolic import GroundAction
 from cake_drake.systems.plan_source import MAX_TRIES, ActionCommand, Refusal
@@ -215,9 +222,13 @@ class LearnedSkills(LeafSystem):
             return
         arm = self._arm.Eval(context)
         hand = self._hand.Eval(context)
+        skill = skill_vector(prog.context, cubes, X_WG)
+        width = hand[0] + hand[1]
         observation = {
-            "observation.state": np.r_[arm[:7], hand[0] + hand[1]].astype(np.float32),
-            "observation.skill": skill_vector(prog.context, cubes, X_WG),
+            "observation.state": np.r_[arm[:7], width].astype(np.float32),
+            "observation.skill": skill,
+            # What a skill that never sees the arm reads: no joint, no absolute height.
+            "observation.relative": relative_vector(skill, width, prog.steps * self.period_s),
         }
         # Guarded as every plug-in's answer: what it raises, or an answer slower than its
         # budget, stops the run in one line naming the skill.

@@ -178,6 +178,10 @@ class WorldConfig:
     #: friction on the arm's seven joints (N m s/rad, one value or seven). The defaults are
     #: the world as it is (the URDFs' own values).
     cube_mass_kg: float = CUBE_MASS
+    #: A range of the cubes' mass, ``[lo, hi]`` kg: each run draws one mass for all its
+    #: cubes from its seed (uniform), in place of ``cube_mass_kg`` (empty: none). Learning
+    #: tasks use it to show a skill every load; the same seed, the same mass.
+    cube_mass_range_kg: list[float] = field(default_factory=list)
     payload_kg: float = 0.0
     joint_friction: list[float] = field(default_factory=lambda: [0.0])
 
@@ -373,12 +377,24 @@ def _add_mismatch(plant: MultibodyPlant, arm, hand, config: WorldConfig) -> None
             joint.set_default_damping_vector(joint.default_damping_vector() + f)
 
 
-def set_world_parameters(scene: Scene, plant_context, config: WorldConfig) -> None:
-    """The cubes' true mass (``config.cube_mass_kg``), set in ``plant_context`` (a body's
-    mass is a parameter of the context): a solid 4 cm cube of that mass."""
-    if config.cube_mass_kg == CUBE_MASS:
+def cube_mass(config: WorldConfig, seed: int) -> float:
+    """The cubes' true mass in a run of ``seed``: ``cube_mass_kg``, or one drawn from
+    ``cube_mass_range_kg`` by the seed (its own stream: the placement's draws stay as
+    they were)."""
+    if not config.cube_mass_range_kg:
+        return float(config.cube_mass_kg)
+    lo, hi = (float(m) for m in config.cube_mass_range_kg)
+    return float(np.random.default_rng([int(seed) % 2**32, 7]).uniform(lo, hi))
+
+
+def set_world_parameters(scene: Scene, plant_context, config: WorldConfig, seed: int = 0) -> None:
+    """The cubes' true mass (:func:`cube_mass` of ``config`` and the run's ``seed``), set
+    in ``plant_context`` (a body's mass is a parameter of the context): a solid 4 cm cube
+    of that mass."""
+    mass = cube_mass(config, seed)
+    if mass == CUBE_MASS:
         return  # the URDF's own cube, untouched
-    inertia = SpatialInertia.SolidBoxWithMass(config.cube_mass_kg, CUBE_SIZE, CUBE_SIZE, CUBE_SIZE)
+    inertia = SpatialInertia.SolidBoxWithMass(mass, CUBE_SIZE, CUBE_SIZE, CUBE_SIZE)
     for instance in scene.cubes.values():
         body = scene.plant.GetBodyByName("cube", instance)
         body.SetSpatialInertiaInBodyFrame(plant_context, inertia)

@@ -93,6 +93,8 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
         cameras=tuple(s.cameras or default_cameras()),
         placement=placement,
         tall=tall,
+        cube_mass_range_kg=tuple(float(m) for m in s.world.cube_mass_range_kg),
+        controller=s.controller,
     )
     if isinstance(ref, Policy):
         spec = replace(
@@ -318,6 +320,9 @@ def _spec_json(spec: EpisodeSpec) -> dict:
     d["cameras"] = [asdict(c) for c in spec.cameras]
     d["blocks"] = list(spec.blocks) if isinstance(spec.blocks, tuple) else spec.blocks
     d["placement"] = list(spec.placement)
+    d["cube_mass_range_kg"] = list(spec.cube_mass_range_kg)
+    c = spec.controller
+    d["controller"] = None if c is None else {"type": type(c).__name__, **asdict(c)}
     return d
 
 
@@ -338,7 +343,24 @@ def spec_from_json(d: dict) -> EpisodeSpec:
         noise=float(d.get("noise", 0.0)),
         act_budget_s=float(d.get("act_budget_s", ACT_BUDGET_S)),
         tall=bool(d.get("tall", False)),
+        cube_mass_range_kg=tuple(d.get("cube_mass_range_kg", ())),
+        controller=_controller_from_json(d.get("controller")),
     )
+
+
+def _controller_from_json(d: dict | None):
+    """The controller a ``report.json`` names (``{"type": "ComputedTorque", ...}``)."""
+    if not d:
+        return None
+    from cake_drake.dynamic import controllers
+
+    fields = dict(d)
+    kind = getattr(controllers, str(fields.pop("type", "")), None)
+    if kind not in (controllers.ComputedTorque, controllers.JointPd, controllers.Pid):
+        raise InputError(
+            f"report.json: spec.controller {d!r:.60} is no controller a recording runs"
+        )
+    return kind(**fields)
 
 
 # --- replay -------------------------------------------------------------------------------

@@ -18,6 +18,10 @@ simulated seconds) and returns what the policy slot observes.
   cube turned by up to ``yaw_deg`` per seed (the scenario's ``world.placement``).
 - ``tall``: generated problems of few, tall towers, start and goal (the scenario's
   ``task.generate.tall``).
+- ``cube_mass_range_kg``: ``(lo, hi)``, the cubes' mass drawn per episode from its seed
+  (the scenario's ``world.cube_mass_range_kg``); empty: the cubes' own 0.05 kg.
+- ``controller``: the controller below (a scenario's ``controller``, e.g.
+  ``ComputedTorque(kp=[400.0], kd=[40.0])``); None: a run's default.
 - every argument is checked when the environment is made, by the same ``check`` a
   scenario gets, with the same field names.
 - a generated problem whose goal already holds is drawn again (the same seed always
@@ -143,6 +147,8 @@ class StackEnv(gymnasium.Env):
         placement: tuple[float, float] = (0.0, 0.0),
         tall: bool = False,
         reward: Mapping | None = None,
+        cube_mass_range_kg: Sequence[float] = (),
+        controller=None,
     ) -> None:
         if obs_mode not in OBS_MODES:
             raise InputError(f"obs_mode {obs_mode!r}; choose one of: {', '.join(OBS_MODES)}")
@@ -165,6 +171,9 @@ class StackEnv(gymnasium.Env):
         if not isinstance(tall, bool):
             raise InputError(f"tall = {tall!r:.40}: true or false")
         self.tall = tall
+        self.cube_mass_range_kg = cube_mass_range_kg
+        #: The task's controller (cake_drake.dynamic.controllers), None: a run's default.
+        self.controller = controller
         #: The reward's weights (cake_drake.learning.envs.rewards): the goal's fraction alone
         #: unless given.
         self.reward = rewards.check_reward(Reward() if reward is None else reward, "reward")
@@ -194,7 +203,7 @@ class StackEnv(gymnasium.Env):
     # --- the episode --------------------------------------------------------------------
 
     def _scenario(self, seed: int, blocks: int | None = None):
-        s = Scenario()
+        s = Scenario() if self.controller is None else Scenario(controller=self.controller)
         if self.problem is None:
             if blocks is None:
                 blocks = int(self.np_random.integers(self.blocks[0], self.blocks[1] + 1))
@@ -216,6 +225,12 @@ class StackEnv(gymnasium.Env):
                 f"placement = {self.placement!r:.40}: (xy in m, yaw in degrees)"
             ) from None
         s.world.placement = Placement(xy=xy, yaw_deg=yaw_deg)
+        try:
+            s.world.cube_mass_range_kg = [float(m) for m in self.cube_mass_range_kg]
+        except (TypeError, ValueError):
+            raise InputError(
+                f"cube_mass_range_kg = {self.cube_mass_range_kg!r:.40}: [lo, hi] kg or empty"
+            ) from None
         s.cameras = list(self.cameras)
         s.outputs.render = False
         s.seed = seed
@@ -260,7 +275,7 @@ class StackEnv(gymnasium.Env):
         plant_context = scene.plant.GetMyMutableContextFromRoot(
             self._simulator.get_mutable_context()
         )
-        set_world_parameters(scene, plant_context, scenario.world)
+        set_world_parameters(scene, plant_context, scenario.world, scenario.seed)
         self._simulator.Initialize()
         self._context = self._simulator.get_context()
         self._source_context = self._source.GetMyContextFromRoot(self._context)

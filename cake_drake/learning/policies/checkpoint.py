@@ -73,7 +73,7 @@ def is_skill_folder(path: Path) -> bool:
     """Whether the checkpoint at ``path`` is a learned skill's (its kind, by
     :mod:`cake_drake.artifacts`)."""
     kind = artifacts.kind_of(path)
-    return kind is not None and kind.name == "skill"
+    return kind is not None and kind.name in artifacts.SKILL_KINDS
 
 
 def describe(path: Path) -> str:

@@ -14,8 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from cake_drake import artifacts
 from cake_drake.errors import InputError
 from cake_drake.learning.data.dataset import require_lerobot
+from cake_drake.learning.policies import relative_skill
 from cake_drake.learning.policies.expert import ClosedLoopExpert
 from cake_drake.learning.policies.lerobot_checkpoint import (
     check_device,
@@ -34,6 +36,8 @@ from cake_drake.symbolic.roles import blocksworld_view
 #: The action spaces a skill answers in, by the size of its action: seven joint targets
 #: and the gripper's width; or a move of the hand and the gripper.
 SKILL_ACTIONS = {8: "joint_position", 7: "ee_delta"}
+#: ``motion.skill_action_space`` for a skill that never sees the arm.
+RELATIVE = "relative"
 
 
 def action_space_of(config: dict) -> str | None:
@@ -42,11 +46,35 @@ def action_space_of(config: dict) -> str | None:
     return SKILL_ACTIONS.get(action)
 
 
+def _relative(path: Path) -> bool:
+    """Whether ``path`` holds a skill that never sees the arm (``skill.json``)."""
+    kind = artifacts.kind_of(path)
+    return kind is not None and kind.name == "relative_skill"
+
+
 def check_folder(path: Path, device: str = "cpu", action_space: str = "") -> Path:
-    """Refuse, in one line, a folder that is no skill checkpoint: not a checkpoint, a
-    whole-task policy, another skill layout or action space (``action_space``: the one
-    the scenario asks for, empty for the checkpoint's own), a device that is not here.
-    The model's folder."""
+    """Refuse, in one line, a folder that is no skill: not a checkpoint, a whole-task
+    policy, another skill layout or action space (``action_space``: the one the scenario
+    asks for, ``relative`` for a skill that never sees the arm, empty for the folder's
+    own), a device that is not here. The model's folder."""
+    if _relative(path):
+        if action_space not in ("", RELATIVE):
+            raise InputError(
+                f"{path}: a skill that never sees the arm (skill.json: hand moves, the "
+                f"gripper decided), run as motion.skill_action_space: {action_space}; leave "
+                f"it empty or give {RELATIVE}"
+            )
+        if device not in ("cpu", "auto"):
+            raise InputError(f"{path}: a skill that never sees the arm acts in NumPy on the "
+                             f"CPU; motion.skill_device: cpu, not {device}")  # fmt: skip
+        return relative_skill.check_folder(path)
+    if action_space == RELATIVE:
+        artifacts.require(path, *artifacts.SKILL_KINDS, role="motion.skills")
+        raise InputError(
+            f"{path}: a skill that reads the arm's joints (a LeRobot checkpoint), run as "
+            f"motion.skill_action_space: {RELATIVE}; give a folder with skill.json (python -m "
+            "cake_drake.train --inputs relative), or leave the setting empty"
+        )
     require_lerobot()
     folder = model_folder(path)
     config = read_checkpoint(folder)
@@ -106,13 +134,19 @@ class CheckpointSkill:
 
 def describe(path: str | Path) -> str:
     """What the skill at ``path`` reads and answers, for a run's ``layers``."""
+    if _relative(Path(path)):
+        return relative_skill.describe(path)
     config = read_checkpoint(model_folder(Path(path)))
-    return f"imitation, {config.get('type')}, answering in {action_space_of(config)}"
+    return (f"imitation, {config.get('type')}, reads the arm's joints, answers in "
+            f"{action_space_of(config)}")  # fmt: skip
 
 
-def make(path: str, device: str = "cpu", ensemble: float = 0.0) -> CheckpointSkill:
-    """The plug-in's factory (``motion.skills``: a checkpoint folder; ``ensemble``:
-    ``motion.skill_ensemble``)."""
+def make(path: str, device: str = "cpu", ensemble: float = 0.0):
+    """The plug-in's factory (``motion.skills``: a skill's folder; ``ensemble``:
+    ``motion.skill_ensemble``, for a checkpoint's action chunks): a skill that never sees
+    the arm, or a LeRobot skill checkpoint."""
+    if _relative(Path(path)):
+        return relative_skill.RelativeSkill(path)
     return CheckpointSkill(path, device, ensemble)
 
 

@@ -47,7 +47,7 @@ from cake_drake.scenario import ImageRecipe, PolicyRecipe, Training
 #: ``mlp`` is the project's own state policy, registered with LeRobot as ``cake_mlp``
 #: (:mod:`cake_drake.learning.policies.mlp`); the others are LeRobot's.
 POLICIES = ("act", "diffusion", "mlp")
-INPUTS = ("state", "images", "both", "skill")
+INPUTS = ("state", "images", "both", "skill", "relative")
 #: What the output folder holds (nothing else is written there).
 TRAIN_OUTPUTS = ("checkpoints", "train.json")
 

@@ -1,0 +1,202 @@
+"""A skill that never sees the arm: its folder, its one checked loader, and how it acts.
+
+The folder (``python -m cake_drake.train DATASET`` on a recording of the ``skills_relative``
+task, or ``--inputs relative``) holds ``skill.json`` (what it reads and answers, and how it
+was trained) and ``weights.npz`` (the network and its statistics). It reads only
+``observation.relative`` (:func:`cake_drake.policy.observations.relative_vector`: the
+action's cubes and target from the hand, the gripper's width, the time in the action),
+the last ``n_obs_steps`` of them, and answers:
+
+- a move of the hand from where it is measured: dx dy dz (m, world axes) and dyaw (rad),
+  turned into joints by the IK below (:class:`cake_drake.systems.skills.LearnedSkills`,
+  ``ee_delta``), at whatever height and place the action is;
+- the gripper as a decision: one logit, the probability that the gripper should be
+  closed. Above ``threshold`` it closes, below ``1 - threshold`` it opens, between the two
+  it holds its last decision (:func:`decide`): a hand at rest whose answer wavers near
+  one half does not open and close in turn.
+
+Acting is NumPy alone (no torch at run time): the network is a few dense layers.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from cake_drake.errors import InputError
+from cake_drake.formats import read_npz
+from cake_drake.policy.observations import RELATIVE_SIZE
+
+#: What ``skill.json`` says a folder is.
+KIND = "relative_skill"
+FORMAT = 1
+INPUT = "observation.relative"
+#: The moves the network answers, in this order, then the gripper's logit.
+MOVES = ("dx", "dy", "dz", "dyaw")
+#: The gripper's decision: closed when its probability passes this, open below 1 - this.
+THRESHOLD = 0.7
+MAX_FILE_BYTES = 16 * 2**20
+
+
+def gelu(x: np.ndarray) -> np.ndarray:
+    """GELU, tanh form (the trainer's ``nn.GELU(approximate="tanh")``)."""
+    return 0.5 * x * (1.0 + np.tanh(0.7978845608028654 * (x + 0.044715 * x**3)))
+
+
+def sigmoid(x):
+    return 1.0 / (1.0 + np.exp(-np.clip(x, -60.0, 60.0)))
+
+
+def decide(p_closed: float, last: bool | None, threshold: float = THRESHOLD) -> bool:
+    """The gripper's decision (True: closed) from the head's probability that it should
+    be closed: closed above ``threshold``, open below ``1 - threshold``, and between the two
+    the last decision held (``last``; None at an action's start: the nearer side)."""
+    if p_closed >= threshold:
+        return True
+    if p_closed <= 1.0 - threshold:
+        return False
+    return p_closed >= 0.5 if last is None else last
+
+
+def layer_shapes(meta: dict) -> list[tuple[int, int]]:
+    """The dense layers' (inputs, outputs) that ``skill.json`` describes."""
+    width = RELATIVE_SIZE * int(meta["n_obs_steps"])
+    shapes = []
+    for hidden in [*meta["hidden_dims"], len(MOVES) + 1]:
+        shapes.append((width, int(hidden)))
+        width = int(hidden)
+    return shapes
+
+
+def _read_meta(folder: Path) -> dict:
+    path = folder / "skill.json"
+    if path.stat().st_size > MAX_FILE_BYTES:
+        raise InputError(f"{path}: over 16 MiB; a skill's description is a few lines")
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise InputError(f"{path}: not JSON ({e})") from None
+    if not isinstance(meta, dict) or meta.get("kind") != KIND:
+        said = meta.get("kind") if isinstance(meta, dict) else meta
+        raise InputError(f"{path}: kind {said!r:.40}; a skill that never sees the arm says "
+                         f"kind: {KIND}")  # fmt: skip
+    if meta.get("format") != FORMAT:
+        raise InputError(f"{path}: format {meta.get('format')!r}; this cake_drake reads {FORMAT}")
+    if meta.get("input") != INPUT or meta.get("input_size") != RELATIVE_SIZE:
+        raise InputError(
+            f"{path}: reads {meta.get('input')!r} of {meta.get('input_size')!r} numbers; this "
+            f"cake_drake's skills read {INPUT} of {RELATIVE_SIZE} (train it again)"
+        )
+    steps, hidden = meta.get("n_obs_steps"), meta.get("hidden_dims")
+    if not (isinstance(steps, int) and 1 <= steps <= 10):
+        raise InputError(f"{path}: n_obs_steps {steps!r}; 1 to 10 observations")
+    if not (isinstance(hidden, list) and hidden and all(isinstance(h, int) and 1 <= h <= 4096
+                                                        for h in hidden)):  # fmt: skip
+        raise InputError(f"{path}: hidden_dims {hidden!r:.40}; a list of layer widths, 1 to 4096")
+    if meta.get("moves") != list(MOVES):
+        raise InputError(f"{path}: moves {meta.get('moves')!r:.60}; a skill answers {list(MOVES)}")
+    gripper = meta.get("gripper")
+    if not (isinstance(gripper, dict) and gripper.get("head") == "closed_logit"):
+        raise InputError(
+            f"{path}: no gripper head (gripper.head: closed_logit, one logit: the gripper "
+            "as a decision); a skill that never sees the arm decides its gripper"
+        )
+    threshold = gripper.get("threshold", THRESHOLD)
+    if not (isinstance(threshold, int | float) and 0.5 <= threshold < 1.0):
+        raise InputError(f"{path}: gripper.threshold {threshold!r:.24}; from 0.5 to below 1")
+    return meta
+
+
+def check_folder(path: Path, **needs) -> Path:
+    """Refuse, in one line, a folder that is no skill that never sees the arm, or whose
+    weights do not fit its description (a gripper head missing or of another size, a
+    layer of another width, numbers that are not finite). The folder."""
+    folder = Path(path)
+    _weights(folder, _read_meta(folder))
+    return folder
+
+
+def _weights(folder: Path, meta: dict) -> dict[str, np.ndarray]:
+    shapes = layer_shapes(meta)
+    width = RELATIVE_SIZE * int(meta["n_obs_steps"])
+    expected = {"in_mean": (width,), "in_std": (width,), "move_mean": (len(MOVES),),
+                "move_std": (len(MOVES),)}  # fmt: skip
+    for k, (n_in, n_out) in enumerate(shapes):
+        expected[f"w{k}"], expected[f"b{k}"] = (n_in, n_out), (n_out,)
+    path = folder / "weights.npz"
+    arrays = read_npz(path, "a skill's weights (skill.json says which)",
+                      {name: (None,) * len(shape) for name, shape in expected.items()},
+                      file_limit=MAX_FILE_BYTES * 4)  # fmt: skip
+    last = f"w{len(shapes) - 1}"
+    for name, shape in expected.items():
+        got = tuple(arrays[name].shape)
+        if got != shape:
+            if name in (last, f"b{len(shapes) - 1}"):
+                raise InputError(
+                    f"{path}: the last layer answers {got[-1]} numbers; a skill answers "
+                    f"{len(MOVES)} moves ({' '.join(MOVES)}) and its gripper head (1 logit): "
+                    f"{len(MOVES) + 1}"
+                )
+            raise InputError(f"{path}: {name} has shape {got}; skill.json describes {shape}")
+        if not np.all(np.isfinite(arrays[name])):
+            raise InputError(f"{path}: {name} holds numbers that are not finite")
+    return {k: np.asarray(v, np.float64) for k, v in arrays.items()}
+
+
+class RelativeSkill:
+    """The skill of a folder, as :class:`cake_drake.systems.skills.LearnedSkills` asks it:
+    ``reset()`` at each new action, ``act(observation)`` -> 7 numbers of ``ee_delta`` (the
+    move, no roll or pitch, and the gripper: 1 open, 0 closed)."""
+
+    action_space = "ee_delta"
+
+    def __init__(self, path: str | Path, threshold: float | None = None) -> None:
+        self.folder = Path(path)
+        self.meta = _read_meta(self.folder)
+        w = _weights(self.folder, self.meta)
+        self.layers = [(w[f"w{k}"], w[f"b{k}"]) for k in range(len(layer_shapes(self.meta)))]
+        self.in_mean, self.in_std = w["in_mean"], w["in_std"]
+        self.move_mean, self.move_std = w["move_mean"], w["move_std"]
+        self.n_obs = int(self.meta["n_obs_steps"])
+        self.threshold = float(threshold or self.meta["gripper"].get("threshold", THRESHOLD))
+        self.reset()
+
+    def reset(self) -> None:
+        self._seen: list[np.ndarray] = []
+        self._closed: bool | None = None
+
+    def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The moves and the gripper's probability of closed for inputs ``x`` (B, n_obs *
+        15), oldest observation first."""
+        h = (np.asarray(x, np.float64) - self.in_mean) / self.in_std
+        for w, b in self.layers[:-1]:
+            h = gelu(h @ w + b)
+        w, b = self.layers[-1]
+        out = h @ w + b
+        return self.move_mean + out[:, : len(MOVES)] * self.move_std, sigmoid(out[:, -1])
+
+    def act(self, observation) -> np.ndarray:
+        now = np.asarray(observation[INPUT], np.float64).reshape(RELATIVE_SIZE)
+        if not self._seen:
+            self._seen = [now] * self.n_obs
+        self._seen = [*self._seen[1:], now]
+        moves, p_closed = self.forward(np.concatenate(self._seen)[None])
+        self._closed = decide(float(p_closed[0]), self._closed, self.threshold)
+        dx, dy, dz, dyaw = moves[0]
+        return np.array([dx, dy, dz, 0.0, 0.0, dyaw, 0.0 if self._closed else 1.0])
+
+
+def describe(path: str | Path) -> str:
+    """What the skill at ``path`` reads and answers, for a run's ``layers``."""
+    _read_meta(Path(path))
+    return (
+        "imitation, reads the action from the hand, never the arm; answers hand moves "
+        "(IK below) and the gripper as a decision"
+    )
+
+
+def make(path: str | Path, **options) -> RelativeSkill:
+    """The loader :mod:`cake_drake.artifacts` names for this kind."""
+    return RelativeSkill(path)

@@ -1,0 +1,192 @@
+"""Training a skill that never sees the arm (:mod:`cake_drake.learning.policies.relative_skill`)
+from a recording of the hand's moves (``ee_delta``, with ``skill`` and ``ground_action``).
+
+The recording's frames are cut into per-action segments (where ``ground_action`` changes;
+frames with no action under way are not a skill's). Each frame gives the network its
+``observation.relative`` (the recording's ``skill`` numbers, the gripper's width from
+``observation.state``, the seconds since its segment began) and the ones before it, and
+two targets: the demonstrator's move of the hand (dx dy dz dyaw, standardised; an L1
+loss, as the other policies') and whether its gripper was closed (a binary
+cross-entropy on one logit: :func:`losses`). The recording's joints are never read.
+Torch trains it on the CPU; the folder is written through the output transaction.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cake_drake.errors import InputError
+from cake_drake.learning.policies import relative_skill as rs
+from cake_drake.policy.observations import SKILL_SIZE
+
+#: What a training writes.
+FILES = ("skill.json", "weights.npz")
+#: The recording's action: dx dy dz droll dpitch dyaw gripper (1 open, 0 closed).
+MOVE_COLUMNS = (0, 1, 2, 5)
+GRIPPER_COLUMN = 6
+
+
+def read_frames(root: Path) -> dict[str, np.ndarray]:
+    """The columns a relative skill learns from, read from the recording's Parquet files
+    (checked: each column there, of its size): ``skill`` (N, 13), ``width`` (N,),
+    ``action`` (N, 7), ``ground`` (N, 4), ``episode`` and ``frame`` (N,); and the rate."""
+    import pyarrow.parquet as pq  # the lerobot extra's
+
+    root = Path(root)
+    info_path = root / "meta" / "info.json"
+    try:
+        info = json.loads(info_path.read_text())
+        fps = float(info["fps"])
+    except (OSError, ValueError, KeyError, TypeError):
+        raise InputError(f"{info_path}: no recording's info (its fps); record it with "
+                         "python -m cake_drake.record") from None  # fmt: skip
+    files = sorted((root / "data").glob("*/*.parquet"))
+    if not files:
+        raise InputError(f"{root}: no data/*/*.parquet; not a recording")
+    wanted = {"observation.state": 8, "skill": SKILL_SIZE, "action": 7, "ground_action": 4}
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in (*wanted, "episode_index", "frame_index")}
+    for path in files:
+        table = pq.read_table(path, columns=None)
+        for key in parts:
+            if key not in table.column_names:
+                what = ("a recording of the hand's moves with the action under way "
+                        "(record the skills_relative task)")  # fmt: skip
+                raise InputError(f"{path}: no column {key!r}; a relative skill learns from {what}")
+            column = table.column(key).combine_chunks()
+            if key in wanted:
+                values = column.flatten().to_numpy(zero_copy_only=False)
+                if len(values) != len(column) * wanted[key]:
+                    raise InputError(f"{path}: {key} is not {wanted[key]} numbers a frame")
+                parts[key].append(values.reshape(len(column), wanted[key]))
+            else:
+                parts[key].append(column.to_numpy(zero_copy_only=False))
+    cols = {k: np.concatenate(v) for k, v in parts.items()}
+    return {
+        "skill": cols["skill"].astype(np.float64),
+        "width": cols["observation.state"][:, 7].astype(np.float64),
+        "action": cols["action"].astype(np.float64),
+        "ground": cols["ground_action"].astype(np.int64),
+        "episode": cols["episode_index"].astype(np.int64),
+        "frame": cols["frame_index"].astype(np.int64),
+        "fps": np.float64(fps),
+    }
+
+
+def examples(frames: dict, n_obs: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inputs (N, n_obs * 15: each frame's ``observation.relative`` after the ones before
+    it in its segment, the segment's first repeated before it), moves (N, 4) and the
+    gripper's label (N,: 1 closed) of every frame under an action."""
+    ground, episode, frame = frames["ground"], frames["episode"], frames["frame"]
+    new = np.ones(len(frame), bool)
+    new[1:] = (episode[1:] != episode[:-1]) | np.any(ground[1:] != ground[:-1], axis=1)
+    new[1:] |= frame[1:] != frame[:-1] + 1
+    first = np.flatnonzero(new)
+    lengths = np.diff(np.r_[first, len(frame)])
+    start = np.repeat(first, lengths)
+    seconds = (np.arange(len(frame)) - start) / float(frames["fps"])
+    relative = np.column_stack([frames["skill"], frames["width"], seconds])
+    under = ground[:, 0] >= 0
+    rows = np.flatnonzero(under)
+    history = [relative[np.maximum(rows - k, start[rows])] for k in range(n_obs - 1, -1, -1)]
+    x = np.concatenate(history, axis=1)
+    moves = frames["action"][rows][:, MOVE_COLUMNS]
+    closed = (frames["action"][rows, GRIPPER_COLUMN] < 0.5).astype(np.float64)
+    return x, moves, closed
+
+
+def losses(moves_std, logit, target_std, closed):
+    """The training's two losses (torch tensors): the mean absolute error of the
+    standardised moves, and the gripper head's binary cross-entropy on its logit against
+    the label (1 closed, 0 open)."""
+    import torch
+
+    move = (moves_std - target_std).abs().mean()
+    grip = torch.nn.functional.binary_cross_entropy_with_logits(logit, closed)
+    return move, grip
+
+
+def train_relative(
+    root: Path,
+    staged,
+    steps: int,
+    batch_size: int,
+    lr: float,
+    hidden_dims: list[int],
+    n_obs_steps: int,
+    seed: int = 0,
+    progress=print,
+) -> dict:
+    """Train the skill on the recording at ``root``; its ``skill.json`` and
+    ``weights.npz`` written into ``staged`` (an ``OutputDir``: the caller commits). The
+    summary: frames, minutes, the gripper head's accuracy on the frames."""
+    import torch
+    from torch import nn
+
+    t0 = time.perf_counter()
+    frames = read_frames(root)
+    x, moves, closed = examples(frames, n_obs_steps)
+    if len(x) < batch_size:
+        raise InputError(
+            f"{root}: {len(x)} frames under an action; fewer than a batch ({batch_size})"
+        )
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    in_mean, in_std = x.mean(0), np.maximum(x.std(0), 1e-3)
+    move_mean, move_std = moves.mean(0), np.maximum(moves.std(0), 1e-4)
+    layers: list[nn.Module] = []
+    width = x.shape[1]
+    for hidden in hidden_dims:
+        layers += [nn.Linear(width, hidden), nn.GELU(approximate="tanh")]
+        width = hidden
+    layers.append(nn.Linear(width, len(rs.MOVES) + 1))
+    net = nn.Sequential(*layers)
+    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: 0.01 + 0.99 * 0.5 * (1 + math.cos(math.pi * min(s / steps, 1.0)))
+    )
+    xs = torch.as_tensor((x - in_mean) / in_std, dtype=torch.float32)
+    ys = torch.as_tensor((moves - move_mean) / move_std, dtype=torch.float32)
+    cs = torch.as_tensor(closed, dtype=torch.float32)
+    shown = max(steps // 10, 1)
+    for step in range(1, steps + 1):
+        idx = torch.as_tensor(rng.integers(0, len(xs), batch_size))
+        out_t = net(xs[idx])
+        move, grip = losses(out_t[:, :-1], out_t[:, -1], ys[idx], cs[idx])
+        loss = move + grip
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        if step % shown == 0 or step == steps:
+            progress(f"step {step}/{steps}: move L1 {move.item():.4f} (std), "
+                     f"gripper BCE {grip.item():.4f}")  # fmt: skip
+    with torch.no_grad():
+        out_all = net(xs)
+        decided = (torch.sigmoid(out_all[:, -1]) >= 0.5).numpy()
+    accuracy = float(np.mean(decided == (closed > 0.5)))
+    minutes = (time.perf_counter() - t0) / 60
+    trained = (f"trained {steps} steps on {len(x)} frames of {root.name} "
+               f"({minutes:.1f} min, CPU)")  # fmt: skip
+    meta = {
+        "kind": rs.KIND, "format": rs.FORMAT, "input": rs.INPUT,
+        "input_size": x.shape[1] // n_obs_steps, "n_obs_steps": n_obs_steps,
+        "hidden_dims": list(hidden_dims), "moves": list(rs.MOVES),
+        "gripper": {"head": "closed_logit", "threshold": rs.THRESHOLD},
+        "trained": trained,
+        "recipe": {"steps": steps, "batch_size": batch_size, "lr": lr, "seed": seed,
+                   "recording": str(root), "frames": len(x)},
+        "gripper_accuracy": round(accuracy, 4),
+    }  # fmt: skip
+    arrays = {"in_mean": in_mean, "in_std": in_std, "move_mean": move_mean, "move_std": move_std}
+    linear = [m for m in net if isinstance(m, nn.Linear)]
+    for k, m in enumerate(linear):
+        arrays[f"w{k}"] = m.weight.detach().numpy().T.astype(np.float64)
+        arrays[f"b{k}"] = m.bias.detach().numpy().astype(np.float64)
+    staged.write_text("skill.json", json.dumps(meta, indent=2) + "\n")
+    np.savez_compressed(staged.path("weights.npz"), **arrays)
+    return {"frames": len(x), "minutes": minutes, "gripper_accuracy": accuracy}

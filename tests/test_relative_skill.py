@@ -1,0 +1,236 @@
+"""A skill that never sees the arm: what it reads does not move when the scene does; the
+gripper is a decision (its loss and threshold by hand); its folder is checked before
+anything runs, and a skill of the other kind is refused where this one is asked for.
+
+The checked-in joint-space skill (models/policies/skills) is the other kind; the
+relative folders here are written by the trainer's own format (skill.json,
+weights.npz) with small random weights.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+
+from cake_drake.errors import InputError
+from cake_drake.learning.policies import relative_skill as rs
+from cake_drake.policy.observations import (
+    RELATIVE_SIZE,
+    relative_vector,
+    skill_context,
+    skill_vector,
+)
+from cake_drake.symbolic import GroundAction
+from cake_drake.world.scene import CUBE_SIZE, SLOTS
+
+ROOT = Path(__file__).resolve().parent.parent
+JOINT_SKILL = ROOT / "models" / "policies" / "skills"
+
+
+def write_skill(folder: Path, hidden=(16, 16), n_obs: int = 2, last: int | None = None,
+                gripper: dict | None = None, seed: int = 0) -> Path:  # fmt: skip
+    """A relative skill's folder with random weights (``last``: the last layer's outputs)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = {
+        "kind": rs.KIND, "format": rs.FORMAT, "input": rs.INPUT, "input_size": RELATIVE_SIZE,
+        "n_obs_steps": n_obs, "hidden_dims": list(hidden), "moves": list(rs.MOVES),
+        "gripper": gripper if gripper is not None else {"head": "closed_logit", "threshold": 0.7},
+    }  # fmt: skip
+    (folder / "skill.json").write_text(json.dumps(meta))
+    rng = np.random.default_rng(seed)
+    width = RELATIVE_SIZE * n_obs
+    arrays = {"in_mean": np.zeros(width), "in_std": np.ones(width),
+              "move_mean": np.zeros(4), "move_std": np.full(4, 0.01)}  # fmt: skip
+    sizes = [*hidden, last if last is not None else len(rs.MOVES) + 1]
+    for k, n in enumerate(sizes):
+        arrays[f"w{k}"] = rng.normal(0, 0.1, (width, n))
+        arrays[f"b{k}"] = np.zeros(n)
+        width = n
+    np.savez(folder / "weights.npz", **arrays)
+    return folder
+
+
+# --- invariance ---------------------------------------------------------------------------
+
+DOWN = RotationMatrix.MakeXRotation(np.pi)
+
+
+def _scene(lift_cubes: int, shift_xy=(0.0, 0.0)):
+    """Towers c-a (a on c) and d-b, a loose cube e, and the hand above a: the whole scene
+    raised by ``lift_cubes`` whole cubes (on that many cubes under each tower and under e)
+    and moved across the table by ``shift_xy``."""
+    dz, (dx, dy) = lift_cubes * CUBE_SIZE, shift_xy
+    yaw = RotationMatrix(RollPitchYaw(0.0, 0.0, 0.3))
+    cubes = {}
+    for name, (x, y, level, turn) in {
+        "c": (0.50, 0.10, 0, False), "a": (0.501, 0.102, 1, True),
+        "d": (0.45, -0.15, 0, False), "b": (0.452, -0.149, 1, False),
+        "e": (0.35, 0.25, 0, True),
+    }.items():  # fmt: skip
+        z = CUBE_SIZE / 2 + level * CUBE_SIZE + dz
+        cubes[name] = RigidTransform(yaw if turn else RotationMatrix(), [x + dx, y + dy, z])
+    for k in range(lift_cubes):  # what the raised scene stands on
+        for base, (x, y) in {"c": (0.50, 0.10), "d": (0.45, -0.15), "e": (0.35, 0.25)}.items():
+            cubes[f"{base}{k}"] = RigidTransform([x + dx, y + dy, CUBE_SIZE / 2 + k * CUBE_SIZE])
+    hand = RigidTransform(DOWN @ RotationMatrix.MakeZRotation(0.1),
+                          [0.49 + dx, 0.11 + dy, 0.21 + dz])  # fmt: skip
+    return cubes, hand
+
+
+@pytest.mark.parametrize("action", [("unstack", ("a", "c")), ("stack", ("a", "b")),
+                                    ("pick-up", ("e",))])  # fmt: skip
+def test_the_scene_moved_up_by_whole_cubes_or_across_the_table_reads_the_same(action):
+    action = GroundAction(*action)
+    seen = []
+    for lift, shift in ((0, (0.0, 0.0)), (3, (0.0, 0.0)), (6, (0.0, 0.0)), (2, (0.03, -0.04))):
+        cubes, hand = _scene(lift, shift)
+        ctx = skill_context(action, cubes, SLOTS)
+        seen.append(relative_vector(skill_vector(ctx, cubes, hand), 0.08, 1.3))
+    for other in seen[1:]:
+        # Number for number, to float32's last digits (the sums differ in their roundings).
+        np.testing.assert_allclose(other, seen[0], rtol=0, atol=2e-7)
+    # And what a joint-space skill reads does change: the arm reaches 24 cm higher.
+    assert not np.allclose(_scene(6)[1].translation(), _scene(0)[1].translation())
+
+
+# --- the gripper as a decision ------------------------------------------------------------
+
+
+def test_the_gripper_decision_holds_between_its_thresholds():
+    assert rs.decide(0.71, last=False) is True  # past the threshold: close
+    assert rs.decide(0.29, last=True) is False  # below 1 - threshold: open
+    # Between the two, the last decision is held: a wavering answer does not flicker.
+    assert rs.decide(0.6, last=False) is False and rs.decide(0.4, last=True) is True
+    assert rs.decide(0.6, last=None) is True and rs.decide(0.4, last=None) is False
+    # A sequence that wavers around one half opens and closes once each.
+    p = [0.1, 0.45, 0.55, 0.75, 0.52, 0.48, 0.6, 0.2, 0.55, 0.45]
+    last, decisions = None, []
+    for q in p:
+        last = rs.decide(q, last)
+        decisions.append(last)
+    assert decisions == [False] * 3 + [True] * 4 + [False] * 3
+
+
+def test_the_gripper_loss_is_the_binary_cross_entropy_by_hand():
+    torch = pytest.importorskip("torch")
+    from cake_drake.learning.training.relative_skill import losses
+
+    logit = torch.tensor([2.0, -1.0, 0.0])
+    closed = torch.tensor([1.0, 0.0, 1.0])
+    moves = torch.tensor([[0.5, -0.5, 0.0, 1.0]])
+    target = torch.tensor([[0.0, 0.0, 0.0, 0.0]])
+    move, grip = losses(moves, logit, target, closed)
+    # -[log s(2) + log(1 - s(-1)) + log s(0)] / 3, s the logistic function.
+    s = lambda x: 1 / (1 + math.exp(-x))  # noqa: E731
+    by_hand = -(math.log(s(2.0)) + math.log(1 - s(-1.0)) + math.log(s(0.0))) / 3
+    assert grip.item() == pytest.approx(by_hand, rel=1e-6)
+    assert move.item() == pytest.approx(0.5, rel=1e-6)  # (0.5 + 0.5 + 0 + 1) / 4
+
+
+def test_a_skill_answers_a_hand_move_and_a_decided_gripper(tmp_path):
+    skill = rs.RelativeSkill(write_skill(tmp_path / "s"))
+    obs = {rs.INPUT: np.linspace(-0.1, 0.1, RELATIVE_SIZE)}
+    answer = skill.act(obs)
+    assert answer.shape == (7,) and np.all(np.isfinite(answer))
+    assert answer[3] == 0.0 and answer[4] == 0.0  # no roll or pitch: the hand stays down
+    assert answer[6] in (0.0, 1.0)
+    # The NumPy forward is the network written: one layer by hand.
+    w = np.load(tmp_path / "s" / "weights.npz")
+    x = np.concatenate([obs[rs.INPUT]] * 2)
+    h = rs.gelu(x @ w["w0"] + w["b0"])
+    h = rs.gelu(h @ w["w1"] + w["b1"])
+    out = h @ w["w2"] + w["b2"]
+    moves, p = skill.forward(x[None])
+    np.testing.assert_allclose(moves[0], out[:4] * 0.01)
+    assert p[0] == pytest.approx(1 / (1 + np.exp(-out[4])))
+
+
+# --- folders checked before anything runs -------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "damage, said",
+    [
+        ({"last": 4}, "the last layer answers 4 numbers; a skill answers 4 moves"),
+        ({"last": 7}, "the last layer answers 7 numbers"),
+        ({"gripper": {}}, "no gripper head (gripper.head: closed_logit"),
+        ({"gripper": {"head": "closed_logit", "threshold": 0.3}}, "gripper.threshold 0.3"),
+    ],
+)
+def test_a_skill_whose_gripper_head_is_missing_or_of_another_size_is_one_line(
+    tmp_path, damage, said
+):
+    folder = write_skill(tmp_path / "s", **damage)
+    with pytest.raises(InputError, match=said.replace("(", r"\(")):
+        rs.check_folder(folder)
+
+
+def test_numbers_that_are_not_finite_are_refused(tmp_path):
+    folder = write_skill(tmp_path / "s")
+    w = dict(np.load(folder / "weights.npz"))
+    w["w1"][0, 0] = np.nan
+    np.savez(folder / "weights.npz", **w)
+    with pytest.raises(InputError, match="w1 holds numbers that are not finite"):
+        rs.check_folder(folder)
+
+
+def _run(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", *args], cwd=cwd, capture_output=True,
+        text=True, timeout=300, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "skills, space, said",
+    [
+        (JOINT_SKILL, "relative", "a skill that reads the arm's joints (a LeRobot checkpoint), "
+         "run as motion.skill_action_space: relative"),
+        (None, "joint_position", "a skill that never sees the arm (skill.json: hand moves, "
+         "the gripper decided), run as motion.skill_action_space: joint_position"),
+        (None, "ee_delta", "run as motion.skill_action_space: ee_delta"),
+    ],
+)  # fmt: skip
+def test_a_skill_of_the_other_kind_is_refused_before_simulating(tmp_path, skills, space, said):
+    pytest.importorskip("lerobot")
+    folder = skills or write_skill(tmp_path / "rel")
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text(
+        's:\n  task: {problem: "package://cake_drake/pddl/stack2.pddl"}\n'
+        f'  motion: {{skills: "{folder}", skill_action_space: {space}}}\n'
+    )
+    r = _run(
+        "--scenario", str(scenario), "--name", "s", "--out", str(tmp_path / "out"), cwd=tmp_path
+    )
+    assert r.returncode == 2, r.stderr
+    assert said in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()  # refused before anything was written
+
+
+def test_a_mass_range_is_drawn_per_seed_and_checked():
+    from cake_drake.pipeline import check
+    from cake_drake.scenario import Scenario
+    from cake_drake.world.scene import WorldConfig, cube_mass
+
+    w = WorldConfig(cube_mass_range_kg=[0.05, 0.5])
+    masses = [cube_mass(w, seed) for seed in range(200)]
+    assert all(0.05 <= m <= 0.5 for m in masses) and len(set(masses)) == 200
+    assert cube_mass(w, 7) == cube_mass(w, 7)  # the same seed, the same mass
+    assert min(masses) < 0.1 and max(masses) > 0.45  # the whole range is drawn
+    assert cube_mass(WorldConfig(cube_mass_kg=0.2), 3) == 0.2
+    for bad, said in (([0.5, 0.05], "lo above hi"), ([0.05], "give two"),
+                      ([0.05, 2.0], "outside 0.01 to 1")):  # fmt: skip
+        s = Scenario()
+        s.task.problem = "package://cake_drake/pddl/stack2.pddl"
+        s.world.cube_mass_range_kg = bad
+        with pytest.raises(InputError, match=said):
+            check(s, write=False)
