@@ -2,7 +2,7 @@
 gripper is a decision (its loss and threshold by hand); its folder is checked before
 anything runs, and a skill of the other kind is refused where this one is asked for.
 
-The checked-in joint-space skill (models/policies/skills) is the other kind; the
+The checked-in joint-space skill (models/policies/skills_joints) is the other kind; the
 relative folders here are written by the trainer's own format (skill.json,
 weights.npz) with small random weights.
 """
@@ -32,7 +32,7 @@ from cake_drake.symbolic import GroundAction
 from cake_drake.world.scene import CUBE_SIZE, SLOTS
 
 ROOT = Path(__file__).resolve().parent.parent
-JOINT_SKILL = ROOT / "models" / "policies" / "skills"
+JOINT_SKILL = ROOT / "models" / "policies" / "skills_joints"
 
 
 def write_skill(folder: Path, hidden=(16, 16), n_obs: int = 2, last: int | None = None,
@@ -93,7 +93,7 @@ def test_the_scene_moved_up_by_whole_cubes_or_across_the_table_reads_the_same(ac
     for lift, shift in ((0, (0.0, 0.0)), (3, (0.0, 0.0)), (6, (0.0, 0.0)), (2, (0.03, -0.04))):
         cubes, hand = _scene(lift, shift)
         ctx = skill_context(action, cubes, SLOTS)
-        seen.append(relative_vector(skill_vector(ctx, cubes, hand), 0.08, 1.3))
+        seen.append(relative_vector(skill_vector(ctx, cubes, hand), 0.08))
     for other in seen[1:]:
         # Number for number, to float32's last digits (the sums differ in their roundings).
         np.testing.assert_allclose(other, seen[0], rtol=0, atol=2e-7)
@@ -105,16 +105,19 @@ def test_the_scene_moved_up_by_whole_cubes_or_across_the_table_reads_the_same(ac
 
 
 def test_the_gripper_decision_holds_between_its_thresholds():
-    assert rs.decide(0.71, last=False) is True  # past the threshold: close
-    assert rs.decide(0.29, last=True) is False  # below 1 - threshold: open
+    t = rs.THRESHOLD
+    assert 0.5 < t < 1.0
+    assert rs.decide(t + 0.01, last=False) is True  # past the threshold: close
+    assert rs.decide(1 - t - 0.01, last=True) is False  # below 1 - threshold: open
     # Between the two, the last decision is held: a wavering answer does not flicker.
-    assert rs.decide(0.6, last=False) is False and rs.decide(0.4, last=True) is True
-    assert rs.decide(0.6, last=None) is True and rs.decide(0.4, last=None) is False
+    assert rs.decide(0.55, last=False, threshold=0.7) is False
+    assert rs.decide(0.45, last=True, threshold=0.7) is True
+    assert rs.decide(0.55, last=None) is True and rs.decide(0.45, last=None) is False
     # A sequence that wavers around one half opens and closes once each.
     p = [0.1, 0.45, 0.55, 0.75, 0.52, 0.48, 0.6, 0.2, 0.55, 0.45]
     last, decisions = None, []
     for q in p:
-        last = rs.decide(q, last)
+        last = rs.decide(q, last, threshold=0.7)
         decisions.append(last)
     assert decisions == [False] * 3 + [True] * 4 + [False] * 3
 
@@ -151,6 +154,38 @@ def test_a_skill_answers_a_hand_move_and_a_decided_gripper(tmp_path):
     moves, p = skill.forward(x[None])
     np.testing.assert_allclose(moves[0], out[:4] * 0.01)
     assert p[0] == pytest.approx(1 / (1 + np.exp(-out[4])))
+
+
+def test_a_pick_aims_the_hand_and_a_place_aims_the_held_cube():
+    """The move onto the target: a pick's is the hand's onto the point above its cube; a
+    place's is the held cube's onto where it rests, however the cube sits in the hand."""
+    v = np.zeros(RELATIVE_SIZE)
+    v[4:7] = [0.0, 0.0, -0.012]  # the cube 12 mm below the grasp frame
+    v[7], v[8:11], v[11] = 0.1, [0.05, -0.02, -0.10], 0.3
+    v[1] = 1.0  # unstack
+    np.testing.assert_allclose(rs.target_from_hand(v), [0.05, -0.02, -0.10, 0.1])
+    v[1], v[3] = 0.0, 1.0  # stack
+    np.testing.assert_allclose(rs.target_from_hand(v), [0.05, -0.02, -0.088, 0.2])
+
+
+def test_the_hand_keeps_to_its_target_while_the_fingers_move(tmp_path):
+    """When the gripper's decision changes, the hand keeps to where it was headed (the
+    cube it grasps) until the fingers stop: no lift before the grip."""
+    skill = rs.RelativeSkill(write_skill(tmp_path / "s"))
+    v = np.zeros(RELATIVE_SIZE)
+    v[0], v[13] = 1.0, 0.08
+    decisions = iter([0.1, 0.9, 0.9, 0.9, 0.9, 0.9])
+    widths = iter([0.08, 0.08, 0.06, 0.045, 0.04, 0.04])
+    answers, headed = [], []
+    skill.forward = lambda x: (np.array([[0.001 * len(answers), 0, 0, 0]]),
+                               np.array([next(decisions)]))  # fmt: skip
+    for _ in range(6):
+        v[13] = next(widths)
+        answers.append(skill.act({rs.INPUT: v.copy()}))
+        headed.append(answers[-1][0])
+    assert [a[6] for a in answers] == [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    # Steps 1-4: the fingers close, the hand keeps step 0's heading; step 5: they are still.
+    assert headed[:5] == [0.0] * 5 and headed[5] == pytest.approx(0.005)
 
 
 # --- folders checked before anything runs -------------------------------------------------

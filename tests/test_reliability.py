@@ -104,7 +104,8 @@ def test_the_lerobot_env_offers_only_learning_tasks():
         CakeDrakeEnv(task="learned_tower5")
     offered = str(e.value).split("choose one of: ")[1].split(", ")
     assert offered == ["stack2", "stack2_scratch", "tower3", "tower5", "blocks3", "skills",
-                       "skills_hand", "skills_hand_tall", "skills_tall", "towers8"]  # fmt: skip
+                       "skills_hand", "skills_hand_tall", "skills_relative", "skills_tall",
+                       "towers8"]  # fmt: skip
     assert CakeDrakeEnv(task="tower3").task == "tower3"
 
 

@@ -21,6 +21,11 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 SHIPPED = ROOT / "models" / "policies" / "skills"
+#: What a run's layers say of the shipped skills (a skill that never sees the arm).
+DESCRIBED = (
+    "imitation, reads the action from the hand (never the arm), answers hand moves with IK "
+    "below and a gripper decision"
+)
 
 pytestmark = pytest.mark.slow
 
@@ -193,8 +198,8 @@ short:
     summary = json.loads((run / "summary.json").read_text())
     geometric = summary["layers"]["geometric"]
     assert geometric["kind"] == "learned"
-    assert "reads the action from the hand, never the arm" in geometric["what"]
-    assert "hand moves (IK below) and the gripper as a decision" in geometric["what"]
+    assert "reads the action from the hand (never the arm)" in geometric["what"]
+    assert "answers hand moves with IK below and a gripper decision" in geometric["what"]
     assert summary["skills"]["action_space"] == "ee_delta" and summary["skills"]["steps"] > 0
     q = np.load(run / "trajectory.npz")["q"]
     assert np.abs(q[-1] - q[0]).max() > 1e-3  # the hand moved, IK below turning it into joints
@@ -374,7 +379,7 @@ def test_each_layer_is_labelled_classical_or_learned():
     assert skills["symbolic"]["kind"] == "classical"
     assert skills["geometric"] == {
         "kind": "learned",
-        "what": "skills (package://cake_drake/policies/skills)",
+        "what": f"skills, {DESCRIBED} (package://cake_drake/policies/skills)",
     }
     assert skills["dynamic"]["kind"] == "classical"
 
@@ -384,8 +389,8 @@ def test_the_shipped_learned_tower5_builds_the_tower(tmp_path):
             "--out", str(tmp_path / "t5"))  # fmt: skip
     assert r.returncode == 0, r.stderr
     assert r.stdout.startswith("goal reached: a on b on c on d on e")
-    assert ("layers: symbolic classical (astar-lmcut) · geometric learned (skills "
-            "(package://cake_drake/policies/skills))") in r.stderr  # fmt: skip
+    assert ("layers: symbolic classical (astar-lmcut) · geometric learned (skills, "
+            f"{DESCRIBED} (package://cake_drake/policies/skills))") in r.stderr  # fmt: skip
     assert (SHIPPED / "README.md").is_file()
     size = sum(p.stat().st_size for p in SHIPPED.rglob("*") if p.is_file())
     assert size <= 10 * 2**20

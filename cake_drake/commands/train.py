@@ -29,8 +29,8 @@ joints and observation.environment_state (the cubes' poses and the goal); images
 joints and the cameras (mlp: a small encoder a camera, and the goal without the poses;
 both train on a CPU, ACT's and Diffusion Policy's image encoders are GPU work); both all
 of them (act, diffusion); skill a learned skill; relative a skill that never sees the
-arm (observation.relative: the action from the hand, the gripper's width, the time in
-the action; it answers hand moves and the gripper as a decision, trained on the CPU into
+arm (observation.relative: the action from the hand and the gripper's width; it
+answers hand moves and the gripper as a decision, trained on the CPU into
 OUT/skill.json and OUT/weights.npz, on a recording of the hand's moves).
 Nothing is downloaded: the dataset is read from its folder and backbones start from
 scratch unless --weights names a file. The checkpoint is LeRobot's

@@ -60,12 +60,16 @@ absolute height, so the same action in a scene moved up by whole cubes, or acros
 table, reads the same numbers:
 
 ========= ======================================================================
-numbers   ``observation.relative`` (float32, 15)
+numbers   ``observation.relative`` (float32, 14)
 ========= ======================================================================
 0-12      ``observation.skill``, as above
 13        the gripper's measured width (m)
-14        the time since the action began (s)
 ========= ======================================================================
+
+No clock: a skill that read the time since its action began would take a slower
+approach than its demonstrator's for a later phase (closing the hand above a cube it
+has not reached yet); where the hand is from the cube and the target, and the gripper's
+width, say which phase it is in.
 
 ``ground_action`` (int64, 4) says per frame which ground action it is: the schema's
 index (-1: none under way), the cubes' indices in ``cubes`` (-1: none), and the action's
@@ -102,8 +106,8 @@ GOAL_START = MAX_CUBES * 7
 #: The ground actions a skill executes, by what they do (the exercise's names).
 SKILL_SCHEMAS = ("pick-up", "unstack", "put-down", "stack")
 SKILL_SIZE = 13
-#: ``observation.relative``: the skill's numbers, the gripper's width, time in the action.
-RELATIVE_SIZE = SKILL_SIZE + 2
+#: ``observation.relative``: the skill's numbers and the gripper's width.
+RELATIVE_SIZE = SKILL_SIZE + 1
 #: The frame's ground action: schema, moved cube, other cube, the action's place in the plan.
 GROUND_ACTION_SIZE = 4
 NO_GROUND_ACTION = np.full(GROUND_ACTION_SIZE, -1, np.int64)
@@ -244,13 +248,12 @@ def skill_vector(
     return out
 
 
-def relative_vector(skill: np.ndarray, width: float, seconds: float) -> np.ndarray:
-    """``observation.relative`` (see the module's table): ``skill`` (:func:`skill_vector`),
-    the gripper's measured ``width`` (m) and the ``seconds`` since the action began."""
+def relative_vector(skill: np.ndarray, width: float) -> np.ndarray:
+    """``observation.relative`` (see the module's table): ``skill`` (:func:`skill_vector`)
+    and the gripper's measured ``width`` (m)."""
     out = np.empty(RELATIVE_SIZE, np.float32)
     out[:SKILL_SIZE] = skill
     out[SKILL_SIZE] = width
-    out[SKILL_SIZE + 1] = seconds
     return out
 
 

@@ -22,7 +22,7 @@ would compute waypoints and IK, a learned skill is asked every ``1 / rate_hz`` s
 seconds for its action, from the joints and the action's own numbers (``observation.skill``:
 :func:`cake_drake.policy.observations.skill_vector`, its targets fixed when the action
 starts as the classical layer fixes its waypoints), or, for a skill that never sees the
-arm, from those numbers, the gripper's width and the time in the action alone
+arm, from those numbers and the gripper's width alone
 (``observation.relative``: :func:`cake_drake.policy.observations.relative_vector`).
 The skill is any object with ``reset()`` (a new action: no history) and
 ``act(observation)``; a checkpoint's adapter is made through the plug-in door, so
@@ -228,7 +228,7 @@ class LearnedSkills(LeafSystem):
             "observation.state": np.r_[arm[:7], width].astype(np.float32),
             "observation.skill": skill,
             # What a skill that never sees the arm reads: no joint, no absolute height.
-            "observation.relative": relative_vector(skill, width, prog.steps * self.period_s),
+            "observation.relative": relative_vector(skill, width),
         }
         # Guarded as every plug-in's answer: what it raises, or an answer slower than its
         # budget, stops the run in one line naming the skill.

@@ -4,12 +4,17 @@ The folder (``python -m cake_drake.train DATASET`` on a recording of the ``skill
 task, or ``--inputs relative``) holds ``skill.json`` (what it reads and answers, and how it
 was trained) and ``weights.npz`` (the network and its statistics). It reads only
 ``observation.relative`` (:func:`cake_drake.policy.observations.relative_vector`: the
-action's cubes and target from the hand, the gripper's width, the time in the action),
+action's cubes and target from the hand, and the gripper's width),
 the last ``n_obs_steps`` of them, and answers:
 
-- a move of the hand from where it is measured: dx dy dz (m, world axes) and dyaw (rad),
-  turned into joints by the IK below (:class:`cake_drake.systems.skills.LearnedSkills`,
-  ``ee_delta``), at whatever height and place the action is;
+- where the hand should be next, from the action's target (:func:`target_from_hand`:
+  above the cube for a pick or an unstack; for a place, where the held cube is to rest):
+  dx dy dz (m, world axes) and dyaw (rad). Added to the move onto the target, it is a
+  move of the hand, turned into joints by the IK below
+  (:class:`cake_drake.systems.skills.LearnedSkills`, ``ee_delta``), at whatever height
+  and place the action is. Answered from the target rather than from the hand, a grasp
+  or a place is as precise as the measured cube: the network says "at the cube", not
+  "a little further";
 - the gripper as a decision: one logit, the probability that the gripper should be
   closed. Above ``threshold`` it closes, below ``1 - threshold`` it opens, between the two
   it holds its last decision (:func:`decide`): a hand at rest whose answer wavers near
@@ -33,11 +38,36 @@ from cake_drake.policy.observations import RELATIVE_SIZE
 KIND = "relative_skill"
 FORMAT = 1
 INPUT = "observation.relative"
-#: The moves the network answers, in this order, then the gripper's logit.
+#: What the network answers, in this order, then the gripper's logit: the hand's next
+#: target from the action's target (m, world axes; rad about z).
 MOVES = ("dx", "dy", "dz", "dyaw")
+
+
+def target_from_hand(relative: np.ndarray) -> np.ndarray:
+    """The move of the hand that takes what the action moves onto its target, (..., 4):
+    x y z and yaw. A pick or an unstack moves the hand: onto its target (above the cube,
+    ``observation.skill``'s 8-10), turned as the cube is (7). A place moves the held
+    cube: onto where it is to rest (8-10 less the cube from the hand, 4-6), turned as the
+    target says (11 less 7), however the cube sits in the fingers."""
+    relative = np.asarray(relative)
+    picking = (relative[..., 0] + relative[..., 1] > 0.5)[..., None]  # pick-up, unstack
+    place_xyz = relative[..., 8:11] - relative[..., 4:7]
+    place_yaw = (relative[..., 11] - relative[..., 7] + np.pi / 4) % (np.pi / 2) - np.pi / 4
+    xyz = np.where(picking, relative[..., 8:11], place_xyz)
+    yaw = np.where(picking[..., 0], relative[..., 7], place_yaw)
+    return np.concatenate([xyz, yaw[..., None]], axis=-1)
+
+
 #: The gripper's decision: closed when its probability passes this, open below 1 - this.
-THRESHOLD = 0.7
+THRESHOLD = 0.6
 MAX_FILE_BYTES = 16 * 2**20
+#: ``observation.relative``'s gripper width.
+WIDTH = 13
+#: m the fingers' width may change in a step and count as still: while they move on a new
+#: decision, the hand keeps to its target from before it (as the demonstrator's does).
+FINGERS_STILL = 0.0005
+#: Steps the hand waits for its fingers at most (1 s at 10 Hz).
+MAX_WAIT = 10
 
 
 def gelu(x: np.ndarray) -> np.ndarray:
@@ -166,10 +196,13 @@ class RelativeSkill:
     def reset(self) -> None:
         self._seen: list[np.ndarray] = []
         self._closed: bool | None = None
+        self._width: float | None = None
+        self._waited: int | None = None  # steps since the decision changed, while waiting
+        self._last: np.ndarray | None = None  # the answer before it changed
 
     def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The moves and the gripper's probability of closed for inputs ``x`` (B, n_obs *
-        15), oldest observation first."""
+        14), oldest observation first."""
         h = (np.asarray(x, np.float64) - self.in_mean) / self.in_std
         for w, b in self.layers[:-1]:
             h = gelu(h @ w + b)
@@ -183,8 +216,22 @@ class RelativeSkill:
             self._seen = [now] * self.n_obs
         self._seen = [*self._seen[1:], now]
         moves, p_closed = self.forward(np.concatenate(self._seen)[None])
-        self._closed = decide(float(p_closed[0]), self._closed, self.threshold)
-        dx, dy, dz, dyaw = moves[0]
+        closed = decide(float(p_closed[0]), self._closed, self.threshold)
+        width = float(now[WIDTH])
+        if self._closed is not None and closed != self._closed:
+            self._waited = 0
+        elif self._waited is not None:
+            self._waited += 1
+            moving = self._width is not None and abs(width - self._width) > FINGERS_STILL
+            if self._waited >= MAX_WAIT or (self._waited >= 2 and not moving):
+                self._waited = None
+        self._closed, self._width = closed, width
+        if self._waited is None or self._last is None:
+            self._last = moves[0]
+        # While the fingers move on a new decision, the hand keeps to where it was going
+        # before it (the cube it grasps, the place it lets go): no lift before the grip.
+        # The hand's target, answered from the action's target, as a move from the hand.
+        dx, dy, dz, dyaw = self._last + target_from_hand(now)
         return np.array([dx, dy, dz, 0.0, 0.0, dyaw, 0.0 if self._closed else 1.0])
 
 
@@ -192,8 +239,8 @@ def describe(path: str | Path) -> str:
     """What the skill at ``path`` reads and answers, for a run's ``layers``."""
     _read_meta(Path(path))
     return (
-        "imitation, reads the action from the hand, never the arm; answers hand moves "
-        "(IK below) and the gripper as a decision"
+        "imitation, reads the action from the hand (never the arm), answers hand moves "
+        "with IK below and a gripper decision"
     )
 
 

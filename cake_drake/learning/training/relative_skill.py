@@ -4,7 +4,7 @@ from a recording of the hand's moves (``ee_delta``, with ``skill`` and ``ground_
 The recording's frames are cut into per-action segments (where ``ground_action`` changes;
 frames with no action under way are not a skill's). Each frame gives the network its
 ``observation.relative`` (the recording's ``skill`` numbers, the gripper's width from
-``observation.state``, the seconds since its segment began) and the ones before it, and
+``observation.state``) and the ones before it in its segment, and
 two targets: the demonstrator's move of the hand (dx dy dz dyaw, standardised; an L1
 loss, as the other policies') and whether its gripper was closed (a binary
 cross-entropy on one logit: :func:`losses`). The recording's joints are never read.
@@ -29,6 +29,12 @@ FILES = ("skill.json", "weights.npz")
 #: The recording's action: dx dy dz droll dpitch dyaw gripper (1 open, 0 closed).
 MOVE_COLUMNS = (0, 1, 2, 5)
 GRIPPER_COLUMN = 6
+#: Frames ahead (at the recording's 10 Hz: half a second) whose heading a frame learns.
+LOOKAHEAD = 5
+#: Frames ahead whose gripper command a frame learns (0.1 s).
+GRIP_LOOKAHEAD = 1
+#: m from where a motion ends at which the hand counts as arrived there.
+ARRIVED = 0.003
 
 
 def read_frames(root: Path) -> dict[str, np.ndarray]:
@@ -77,10 +83,15 @@ def read_frames(root: Path) -> dict[str, np.ndarray]:
     }
 
 
-def examples(frames: dict, n_obs: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Inputs (N, n_obs * 15: each frame's ``observation.relative`` after the ones before
+def examples(
+    frames: dict, n_obs: int, lookahead: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inputs (N, n_obs * 14: each frame's ``observation.relative`` after the ones before
     it in its segment, the segment's first repeated before it), moves (N, 4) and the
-    gripper's label (N,: 1 closed) of every frame under an action."""
+    gripper's label (N,: 1 closed) of every frame under an action. A frame's move is where
+    the demonstrator's hand was headed ``lookahead`` frames later (the last frame before
+    the action ends or the gripper changes, where that is sooner), from the action's
+    target."""
     ground, episode, frame = frames["ground"], frames["episode"], frames["frame"]
     new = np.ones(len(frame), bool)
     new[1:] = (episode[1:] != episode[:-1]) | np.any(ground[1:] != ground[:-1], axis=1)
@@ -88,14 +99,42 @@ def examples(frames: dict, n_obs: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
     first = np.flatnonzero(new)
     lengths = np.diff(np.r_[first, len(frame)])
     start = np.repeat(first, lengths)
-    seconds = (np.arange(len(frame)) - start) / float(frames["fps"])
-    relative = np.column_stack([frames["skill"], frames["width"], seconds])
+    relative = np.column_stack([frames["skill"], frames["width"]])
     under = ground[:, 0] >= 0
     rows = np.flatnonzero(under)
     history = [relative[np.maximum(rows - k, start[rows])] for k in range(n_obs - 1, -1, -1)]
     x = np.concatenate(history, axis=1)
-    moves = frames["action"][rows][:, MOVE_COLUMNS]
-    closed = (frames["action"][rows, GRIPPER_COLUMN] < 0.5).astype(np.float64)
+    # Where the hand was headed, from the action's target (observation.skill's 8-11: above
+    # the cube for a pick, where the cube rests for a place): the demonstrator's move from
+    # the hand, less where the target is from the hand; taken ``lookahead`` frames on, so
+    # that the answer is always ahead of the hand (a target where the hand already is
+    # would hold it there) and, at the end of a motion, exactly where it ends.
+    # The heading looks no further than the gripper's next change: the hand goes to the
+    # cube and stays there until the fingers have closed, whatever comes after.
+    onto = rs.target_from_hand(frames["skill"])  # the move onto the target
+    headed = frames["action"][:, MOVE_COLUMNS] - onto
+    grip = frames["action"][:, GRIPPER_COLUMN] < 0.5
+    phase = new.copy()
+    phase[1:] |= grip[1:] != grip[:-1]
+    phase_first = np.flatnonzero(phase)
+    phase_end = np.repeat(
+        np.r_[phase_first[1:], len(frame)], np.diff(np.r_[phase_first, len(frame)])
+    )
+    moves = headed[np.minimum(rows + lookahead, phase_end[rows] - 1)]
+    # The gripper's label a little ahead too (within the action): the hand at the cube
+    # decides to close before its fingers show it, so the decision is learned from where
+    # the hand is, not read off the fingers' width.
+    action_end = start + np.repeat(lengths, lengths)
+    ahead = np.minimum(np.arange(len(frame)) + GRIP_LOOKAHEAD, action_end - 1)
+    # Where the hand has arrived where its motion ends and the gripper changes next (the
+    # demonstrator waits there for its clock), the change is the label: a learner that
+    # has arrived decides at once, from where it is.
+    last = phase_end - 1
+    # The hand (a place: the held cube) from the target, against where the motion ends.
+    arrived = np.linalg.norm(-onto[:, :3] - headed[last, :3], axis=1) < ARRIVED
+    changes = (phase_end < action_end) & arrived
+    ahead = np.where(changes, np.minimum(phase_end, action_end - 1), ahead)
+    closed = grip[ahead[rows]].astype(np.float64)
     return x, moves, closed
 
 
@@ -129,7 +168,7 @@ def train_relative(
 
     t0 = time.perf_counter()
     frames = read_frames(root)
-    x, moves, closed = examples(frames, n_obs_steps)
+    x, moves, closed = examples(frames, n_obs_steps, LOOKAHEAD)
     if len(x) < batch_size:
         raise InputError(
             f"{root}: {len(x)} frames under an action; fewer than a batch ({batch_size})"
@@ -177,6 +216,8 @@ def train_relative(
         "input_size": x.shape[1] // n_obs_steps, "n_obs_steps": n_obs_steps,
         "hidden_dims": list(hidden_dims), "moves": list(rs.MOVES),
         "gripper": {"head": "closed_logit", "threshold": rs.THRESHOLD},
+        "lookahead_frames": LOOKAHEAD,
+        "grip_lookahead_frames": GRIP_LOOKAHEAD,
         "trained": trained,
         "recipe": {"steps": steps, "batch_size": batch_size, "lr": lr, "seed": seed,
                    "recording": str(root), "frames": len(x)},
