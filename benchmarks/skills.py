@@ -1,5 +1,7 @@
 """The learned middle at every height and load: learned skills under the planner, row by row,
-with the classical geometric layer on the same episodes beside each.
+with the classical geometric layer on the same episodes beside each (the skills: the ones
+that never see the arm, ``models/policies/skills_relative``, unless ``--skills`` names
+another folder, such as the joint-space ``package://cake_drake/policies/skills``).
 
 Rows (whole runs: planning, the execution monitor with ``re_place``, the simulation, the
 verdict measured from the world), seeds 100000 and up, none a demonstration had:
@@ -18,7 +20,7 @@ and the failures by their first words; ``--json`` keeps the rows.
 
     python benchmarks/skills.py                          # 50 episodes a row (hours)
     python benchmarks/skills.py --episodes 10 --rows problem_5 tall8   # a quick look
-    python benchmarks/skills.py --skills DIR --no-classical              # another skill
+    python benchmarks/skills.py --skills package://cake_drake/policies/skills --no-classical
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from machine import machine
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITE = ROOT / "models" / "scenarios" / "learning.yaml"
-SKILLS = "package://cake_drake/policies/skills"
+SKILLS = "package://cake_drake/policies/skills_relative"
 FIRST_SEED = 100000
 
 
@@ -96,7 +98,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", type=int, nargs="*", default=[6, 8, 10])
     ap.add_argument("--tall", type=int, nargs="*", default=[8, 10])
     ap.add_argument("--rows", nargs="+", help="only these rows (e.g. problem_5 tall8)")
-    ap.add_argument("--skills", default=SKILLS, help="the skills' folder (default: shipped)")
+    ap.add_argument("--skills", default=SKILLS, help="the skills' folder")
     ap.add_argument("--no-classical", action="store_true", help="skip the classical column")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", type=Path, help="also write every episode's row here")

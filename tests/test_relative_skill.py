@@ -2,7 +2,7 @@
 gripper is a decision (its loss and threshold by hand); its folder is checked before
 anything runs, and a skill of the other kind is refused where this one is asked for.
 
-The checked-in joint-space skill (models/policies/skills_joints) is the other kind; the
+The shipped joint-space skill (models/policies/skills) is the other kind; the
 relative folders here are written by the trainer's own format (skill.json,
 weights.npz) with small random weights.
 """
@@ -32,7 +32,7 @@ from cake_drake.symbolic import GroundAction
 from cake_drake.world.scene import CUBE_SIZE, SLOTS
 
 ROOT = Path(__file__).resolve().parent.parent
-JOINT_SKILL = ROOT / "models" / "policies" / "skills_joints"
+JOINT_SKILL = ROOT / "models" / "policies" / "skills"
 
 
 def write_skill(folder: Path, hidden=(16, 16), n_obs: int = 2, last: int | None = None,

@@ -21,11 +21,8 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 SHIPPED = ROOT / "models" / "policies" / "skills"
-#: What a run's layers say of the shipped skills (a skill that never sees the arm).
-DESCRIBED = (
-    "imitation, reads the action from the hand (never the arm), answers hand moves with IK "
-    "below and a gripper decision"
-)
+#: What a run's layers say of the shipped skills (joint-space, a LeRobot checkpoint).
+DESCRIBED = "imitation, cake_mlp, reads the arm's joints, answers in joint_position"
 
 pytestmark = pytest.mark.slow
 
@@ -139,7 +136,7 @@ short:
     r = cli("cake_drake.run", "--scenario", str(path), "--name", "short", "--out", str(out))
     assert r.returncode == 3, r.stderr
     assert "did not do (pick-up a) in 3 tries of 15 steps each" in r.stderr
-    assert "geometric learned (skills (" in r.stderr
+    assert "geometric learned (skills, imitation, cake_mlp, reads the arm's joints" in r.stderr
     summary = json.loads((out / "summary.json").read_text())
     assert summary["layers"]["geometric"]["kind"] == "learned"
     assert summary["layers"]["symbolic"]["kind"] == "classical"
