@@ -141,6 +141,26 @@ def test_resume_with_another_noise_is_refused(recordings, tmp_path):
     one_line(r, 2, "--resume with another noise", "0.005", "0.01")
 
 
+def test_resume_with_another_load_is_refused(recordings, tmp_path):
+    """The cubes' mass range is part of what a recording is: resuming one with another
+    would mix two worlds in one dataset."""
+    import shutil
+
+    folder, _ = recordings
+    shutil.copytree(folder / "noisy", tmp_path / "ds")
+    heavy = tmp_path / "heavy.yaml"
+    heavy.write_text(
+        "stack2:\n"
+        '  task: {problem: "package://cake_drake/pddl/stack2.pddl"}\n'
+        "  world: {placement: {xy: 0.025, yaw_deg: 30.0}, cube_mass_range_kg: [0.1, 0.2]}\n"
+        '  reference: !Policy {factory: "cake_drake.learning.expert:make", '
+        "action_space: joint_position, rate_hz: 10.0, max_steps: 400}\n"
+    )
+    r = cake("record", str(heavy), "--name", "stack2", "--out", str(tmp_path / "ds"),
+             "--episodes", "2", "--no-cameras", "--resume", "--noise", "0.005")  # fmt: skip
+    one_line(r, 2, "--resume with another cube_mass_range_kg", "[0.1, 0.2]")
+
+
 @pytest.mark.parametrize(
     "value, words",
     [

@@ -159,6 +159,7 @@ def _finished(cache: Path) -> dict[int, dict]:
 #: What a resumed recording must share with the one it continues.
 SAME_FOR_RESUME = (
     "control_mode", "rate_hz", "cameras", "problem", "blocks", "placement", "noise",
+    "cube_mass_range_kg", "controller",
 )  # fmt: skip
 
 
