@@ -269,3 +269,19 @@ def test_a_mass_range_is_drawn_per_seed_and_checked():
         s.world.cube_mass_range_kg = bad
         with pytest.raises(InputError, match=said):
             check(s, write=False)
+
+
+def test_a_damaged_recording_is_one_line_naming_its_file(tmp_path):
+    pytest.importorskip("pyarrow")
+    from cake_drake.learning.training.relative_skill import read_frames
+
+    (tmp_path / "meta").mkdir()
+    (tmp_path / "meta" / "info.json").write_text('{"fps": 10}')
+    data = tmp_path / "data" / "chunk-000"
+    data.mkdir(parents=True)
+    (data / "file-000.parquet").write_bytes(b"PAR1" + b"\0" * 100)  # cut short
+    with pytest.raises(InputError, match="file-000.parquet: not a readable Parquet table"):
+        read_frames(tmp_path)
+    (tmp_path / "meta" / "info.json").write_text('{"fps": "ten"')
+    with pytest.raises(InputError, match="info.json: no recording's info"):
+        read_frames(tmp_path)

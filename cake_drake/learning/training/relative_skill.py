@@ -57,7 +57,12 @@ def read_frames(root: Path) -> dict[str, np.ndarray]:
     wanted = {"observation.state": 8, "skill": SKILL_SIZE, "action": 7, "ground_action": 4}
     parts: dict[str, list[np.ndarray]] = {k: [] for k in (*wanted, "episode_index", "frame_index")}
     for path in files:
-        table = pq.read_table(path, columns=None)
+        try:
+            table = pq.read_table(path)
+        except (OSError, ValueError) as e:  # pyarrow's ArrowInvalid is a ValueError
+            said = str(e)[:80]
+            raise InputError(f"{path}: not a readable Parquet table ({said}); record it "
+                             "again with python -m cake_drake.record") from None  # fmt: skip
         for key in parts:
             if key not in table.column_names:
                 what = ("a recording of the hand's moves with the action under way "
