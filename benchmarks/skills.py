@@ -33,6 +33,7 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
+from cake import why  # a failure's kind, as the cake's table says it
 from machine import machine
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -79,14 +80,6 @@ def episode(job) -> dict:
         ok, message, sim_s = False, str(e), 0.0
     return {"row": row, "column": column, "seed": seed, "success": ok, "message": message,
             "sim_s": sim_s, "places_mm": places, "wall_s": time.perf_counter() - t0}  # fmt: skip
-
-
-def why(message: str) -> str:
-    """A failure's kind: its message's first clause, without the names of cubes."""
-    first = message.split(" — ")[0].split("; ")[0]
-    first = re.sub(r"'[^']*'", "'…'", first)
-    first = re.sub(r"\([a-z-]+( [a-z0-9]+)+\)", "(action)", first)
-    return first[:80]
 
 
 def main(argv=None) -> int:
