@@ -285,3 +285,16 @@ def test_a_damaged_recording_is_one_line_naming_its_file(tmp_path):
     (tmp_path / "meta" / "info.json").write_text('{"fps": "ten"')
     with pytest.raises(InputError, match="info.json: no recording's info"):
         read_frames(tmp_path)
+
+
+def test_a_learning_tasks_episodes_carry_its_cubes_mass():
+    """A task's episodes are of its world: one mass (``learned_cake``'s 0.5 kg) or a range."""
+    pytest.importorskip("gymnasium")
+    from cake_drake.learning.data.recording import spec_from_scenario
+    from cake_drake.scenario import load_scenario
+
+    suite = ROOT / "models" / "scenarios" / "learning.yaml"
+    assert spec_from_scenario(load_scenario(suite, "learned_cake")).cube_mass_range_kg == (0.5, 0.5)
+    assert spec_from_scenario(load_scenario(suite, "skills_relative")).cube_mass_range_kg == (
+        0.05, 0.5)  # fmt: skip
+    assert spec_from_scenario(load_scenario(suite, "tower5")).cube_mass_range_kg == ()

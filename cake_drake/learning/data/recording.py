@@ -50,6 +50,7 @@ from cake_drake.scenario import (
     scenario_names,
 )
 from cake_drake.world.cameras import default_cameras
+from cake_drake.world.scene import CUBE_MASS
 
 RECORD_OUTPUTS = ("meta", "data", "videos", "episodes", "report.json")
 
@@ -93,7 +94,9 @@ def spec_from_scenario(scenario, policy: str | None = None) -> EpisodeSpec:
         cameras=tuple(s.cameras or default_cameras()),
         placement=placement,
         tall=tall,
-        cube_mass_range_kg=tuple(float(m) for m in s.world.cube_mass_range_kg),
+        # The cubes' mass as the task says it: a range drawn per episode, or one mass.
+        cube_mass_range_kg=tuple(float(m) for m in s.world.cube_mass_range_kg)
+        or ((s.world.cube_mass_kg,) * 2 if s.world.cube_mass_kg != CUBE_MASS else ()),
         controller=s.controller,
     )
     if isinstance(ref, Policy):
