@@ -49,7 +49,8 @@ def cake_figure(layers: dict, title: str = "") -> Figure:
                 fontweight="bold", va="center", ha="left", color="#222222")  # fmt: skip
         ax.text(x0 + w - 0.25, y0 + height - 0.28, ROLE[name], fontsize=7.5, va="center",
                 ha="right", color="#444444", style="italic")  # fmt: skip
-        what = "\n".join(textwrap.wrap(str(layer.get("what", "")), int(w * 11))[:3])
+        # Characters a line holds inside the tier, its margins kept (monospace, 8.5 pt).
+        what = "\n".join(textwrap.wrap(str(layer.get("what", "")), int((w - 0.5) * 10.5))[:3])
         ax.text(x0 + 0.25, y0 + height - 0.62, what, fontsize=8.5, va="top", ha="left",
                 color="#222222", family="monospace")  # fmt: skip
     top = bottom + len(LAYERS) * (height + gap)
