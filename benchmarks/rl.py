@@ -7,6 +7,11 @@ renderer hangs), then with the task's two
 96 x 96 cameras rendering every step, the same two ways; and with the pixel policy
 answering every step in one process (what a residual's training steps through).
 
+``--runners`` trains PPO from scratch on stack2's state (the task's recipe, ``--steps``
+environment steps a row) with its environments in this process, in two spawned
+processes, and as one and two Ray actors on a local instance, and prints each
+training's steps per second, learner included: what ``train --rl --ray`` costs and buys.
+
 ``--compare DIR...`` evaluates the base policy each RL folder corrects (once), and each
 folder, on the same held-out episodes (``--episodes``, from ``--seed``), through
 ``python -m cake_drake.evaluate``'s library, and prints one row each: success with its
@@ -15,6 +20,7 @@ every folder's success (over its last 50 training episodes) against environment 
 one figure, with the held-out success of each base alone.
 
     python benchmarks/rl.py --throughput
+    python benchmarks/rl.py --runners --steps 2048
     python benchmarks/rl.py --compare outputs/rl/stack2_pixels_rl outputs/rl/stack2_scratch \
         --episodes 50 --figure docs/images/rl_curves.png
 """
@@ -98,6 +104,30 @@ def throughput(steps: int) -> None:
             base.reset(env.unwrapped.policy_task, 2 + k)
     rate = steps / (time.perf_counter() - t0)
     print(f"  {'cameras + stack2_pixels':<22} one process      {rate:7.0f} steps/s")
+
+
+def runners(steps: int) -> None:
+    import tempfile
+
+    from cake_drake.learning.training.rl import check_recipe, train_rl
+    from cake_drake.outputs.files import OutputDir
+    from cake_drake.scenario import load_scenario
+    from cake_drake.sweeps import RayCluster
+
+    scenario = load_scenario(LEARNING, "stack2")
+    base = replace(scenario.training.rl, base="", steps=steps, rollout=256, batch_size=64)
+    print(f"PPO from scratch on stack2's state, {steps} environment steps a row, the learner "
+          "in this process (steps/s over the whole training)")  # fmt: skip
+    rows = [("this process", 1, None), ("spawned processes", 2, None),
+            ("Ray actors (local)", 1, "ray"), ("Ray actors (local)", 2, "ray")]  # fmt: skip
+    for what, envs, ray in rows:
+        recipe = check_recipe(replace(base, envs=envs))
+        cluster = RayCluster(num_cpus=envs) if ray else None
+        with tempfile.TemporaryDirectory() as tmp:
+            with OutputDir(Path(tmp) / "o", "benchmark", ("rl.json",)) as out:
+                info = train_rl(scenario, "stack2", out, recipe, log=lambda line: None,
+                                cluster=cluster)  # fmt: skip
+        print(f"  {what:<20} x {envs}  {info['steps_per_s']:7.1f} steps/s")
 
 
 def _evaluate(path: Path, seeds: list[int], workers: int) -> dict:
@@ -196,7 +226,8 @@ def figure(folders: list[Path], path: Path, bases: dict[str, float], window: int
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--throughput", action="store_true")
-    p.add_argument("--steps", type=int, default=400, help="--throughput: steps a row")
+    p.add_argument("--steps", type=int, default=400, help="--throughput/--runners: steps a row")
+    p.add_argument("--runners", action="store_true")
     p.add_argument("--compare", type=Path, nargs="+", metavar="DIR", default=[])
     p.add_argument("--episodes", type=int, default=50)
     p.add_argument("--seed", type=int, default=100_000, help="the first held-out seed")
@@ -206,6 +237,8 @@ def main() -> None:
     print(machine())
     if args.throughput:
         throughput(args.steps)
+    if args.runners:
+        runners(args.steps)
     if args.compare:
         seeds = list(range(args.seed, args.seed + args.episodes))
         bases = compare(args.compare, seeds, args.workers)

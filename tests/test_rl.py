@@ -365,6 +365,36 @@ def test_a_residual_with_zero_weights_changes_nothing_and_is_bounded(trained):
     assert moved >= 6  # the bound is reached, not just respected
 
 
+def test_on_local_ray_two_runners_write_the_same_files(trained, tmp_path):
+    pytest.importorskip("ray")
+    text = TINY.format(base="").replace("envs: 1", "envs: 2").replace("steps: 128", "steps: 256")
+    (tmp_path / "tiny.yaml").write_text(text)
+    r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "o", "--ray", cwd=tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    out, alone = tmp_path / "o", trained / "scratch" / "out"
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in alone.iterdir())
+    info = json.loads((out / "rl.json").read_text())
+    other = json.loads((alone / "rl.json").read_text())
+    assert info["runners"] == "2 on local Ray instance"
+    assert other["runners"] == "1 on this machine"
+    assert set(info) == set(other) and info["reward"] == other["reward"]
+    # two 50-step episodes' worth on each runner, every one of them reported once
+    assert info["steps"] == 256 and info["episodes"] >= 4
+    rows = (out / "progress.csv").read_text().splitlines()
+    assert rows[0] == "steps,return,length,success,wall_s" and len(rows) == info["episodes"] + 1
+    assert all(int(row.split(",")[2]) == 50 for row in rows[1:])  # episodes end at the budget
+
+
+def test_a_ray_address_nothing_answers_at_is_refused_before_training(tmp_path):
+    pytest.importorskip("ray")
+    r = cake("train", "--rl", str(suite(tmp_path)), "--name", "tiny", "--out",
+             str(tmp_path / "o"), "--ray", "127.0.0.1:1", timeout=60)  # fmt: skip
+    one_line(r, 2, "--ray 127.0.0.1:1: no Ray cluster answers there")
+    assert not (tmp_path / "o").exists()
+    r = cake("train", "--planner", "--out", str(tmp_path / "p"), "--ray")
+    one_line(r, 2, "--ray")
+
+
 def test_sac_trains_too(tmp_path):
     path = suite(tmp_path)
     r = cake("train", "--rl", str(path), "--name", "tiny", "--algorithm", "sac", "--steps",

@@ -74,9 +74,12 @@ episodes, with the task's training.rl recipe (algorithm, steps, environments sid
 the reward's weights; models/scenarios/learning.yaml). With a base (the recipe's, or
 --base DIR: a policy learned by imitation) the learner is a bounded residual on the
 frozen base; without one it learns from scratch. --steps, --envs and --algorithm
-override the recipe. Prints, every rollout, the environment steps, steps/s, the episodes'
-return and success. OUT gets model.zip, rl.json, progress.csv and curve.png; evaluate it
-with python -m cake_drake.evaluate OUT, or run it with reference: !Policy {checkpoint: OUT}.
+override the recipe. With --ray the environments run as Ray actors, one CPU each (on a
+local instance, or on the cluster at ADDRESS, started with `ray start`), the learner
+here: the same recipe, reward and folder. Prints, every rollout, the environment steps,
+steps/s, the episodes' return and success. OUT gets model.zip, rl.json, progress.csv and
+curve.png; evaluate it with python -m cake_drake.evaluate OUT, or run it with reference:
+!Policy {checkpoint: OUT}.
 
 Exit codes: 0 trained; 2 bad input (a dataset lacking what the policy needs, a device
 that is not here, --dagger below 1, --beta outside 0 to 1, --dagger on a dataset with no
@@ -328,9 +331,10 @@ def _main_rl(args: argparse.Namespace) -> int:
     given = {"steps": args.steps, "base": args.base, "algorithm": args.algorithm,
              "envs": args.envs}  # fmt: skip
     recipe = rl.check_recipe(replace(recipe, **{k: v for k, v in given.items() if v is not None}))
+    cluster = ray_engine(args.ray, recipe.envs)  # an address nothing answers at: refused here
     with OutputDir(args.out, "train --rl", rl.FILES, [args.rl]) as staged:
         info = rl.train_rl(scenario, args.name, staged, recipe, args.seed,
-                           log=lambda line: print(line, flush=True))  # fmt: skip
+                           log=lambda line: print(line, flush=True), cluster=cluster)  # fmt: skip
         staged.commit()
     won, of = info["last_episodes_success"]
     print(
@@ -408,7 +412,9 @@ MODES: tuple[Mode, ...] = (
     Mode(
         chooser="rl",
         whose="RL's",
-        reads=frozenset({"rl", "name", "base", "algorithm", "envs", "steps", "device", "seed"}),
+        reads=frozenset(
+            {"rl", "name", "base", "algorithm", "envs", "steps", "device", "seed", "ray"}
+        ),
         refusal="it is not one of RL's settings (the task's training.rl recipe has them)",
         main=_main_rl,
     ),

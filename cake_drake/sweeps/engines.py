@@ -108,9 +108,17 @@ class RayCluster:
                 "head started with `ray start --head`, or auto on one of its nodes)"
             ) from None
 
-    def start(self) -> None:
-        """Start or join Ray now, before the sweep writes anything."""
-        self._init()
+    def start(self):
+        """Start or join Ray now, before anything is written; the ``ray`` module, ready."""
+        return self._init()
+
+    def stop(self) -> None:
+        """Shut down the instance :meth:`start` began here (a cluster joined is left up)."""
+        if self._started:
+            import ray
+
+            ray.shutdown()
+            self._started = False
 
     def imap(self, fn, items: Sequence) -> Iterator:
         """``fn(item)`` for every item, each on a Ray worker (one CPU each), yielded as
@@ -127,9 +135,7 @@ class RayCluster:
                 ray.cancel(ref, force=True)
             raise
         finally:
-            if self._started:
-                ray.shutdown()
-                self._started = False
+            self.stop()
 
     def events(self, jobs: Sequence[dict]) -> Iterator[Event]:
         ray = self._init()
@@ -162,6 +168,4 @@ class RayCluster:
                 ray.cancel(ref, force=True)
             raise
         finally:
-            if self._started:
-                ray.shutdown()
-                self._started = False
+            self.stop()

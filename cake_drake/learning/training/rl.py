@@ -290,9 +290,13 @@ def _model(recipe: RlRecipe, venv, seed: int, residual: bool):
     return model
 
 
-def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=print) -> dict:
+def train_rl(
+    scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=print, cluster=None
+) -> dict:
     """Train ``recipe`` on ``scenario``'s episodes into the staged folder ``out``
-    (:class:`cake_drake.outputs.files.OutputDir`); what ``rl.json`` says of it."""
+    (:class:`cake_drake.outputs.files.OutputDir`); what ``rl.json`` says of it. With
+    ``cluster`` (a :class:`cake_drake.sweeps.RayCluster`) the recipe's environments run
+    as Ray actors there, the learner here."""
     import torch  # torch and Stable-Baselines3 below: seconds, only where one trains
 
     recipe = check_recipe(recipe)
@@ -318,7 +322,11 @@ def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=pri
         spec = replace(spec, cameras=())
     torch.set_num_threads(1)  # the environments have the other cores
     factory = partial(learner_env, spec, recipe, base)
-    if recipe.envs == 1:
+    if cluster is not None:
+        from cake_drake.learning.envs.ray_runners import ray_vec_env
+
+        venv = ray_vec_env(factory, recipe.envs, cluster)
+    elif recipe.envs == 1:
         from stable_baselines3.common.vec_env import DummyVecEnv
 
         venv = DummyVecEnv([factory])
@@ -366,6 +374,9 @@ def train_rl(scenario, label: str, out, recipe: RlRecipe, seed: int = 0, log=pri
         "episodes": len(progress.rows),
         "minutes": round(minutes, 2),
         "steps_per_s": round(steps / max(minutes * 60.0, 1e-9), 1),
+        "runners": f"{recipe.envs} on {cluster}"
+        if cluster is not None
+        else f"{recipe.envs} on this machine",
         "last_episodes_success": [sum(r["success"] for r in recent), len(recent)],
     }
     out.write_json(FILE, info)
