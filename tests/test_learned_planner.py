@@ -437,3 +437,82 @@ def test_a_run_with_the_learned_top_replans_after_a_fault_and_draws_its_cake(tmp
         colour = image[int(image.shape[0] - py), int(px)]
         kind = "learned" if name == "symbolic" else "classical"
         assert np.allclose(colour, to_rgb(COLOURS[kind]), atol=0.02), name
+
+
+# --- the same network from the goal's reward alone -------------------------------------------
+
+
+def test_the_reward_s_baseline_and_log_probabilities_by_hand():
+    import torch
+
+    from cake_drake.learning.training.planner_reward import _log_probs, advantages
+
+    r = np.array([1.0, 0.5, 0.0, 2.0, 2.0])
+    problem = np.array([0, 0, 0, 1, 1])
+    # each episode against the mean of its problem's others; a problem all alike: zeros
+    np.testing.assert_allclose(advantages(r, problem), [0.75, 0.0, -0.75, 0.0, 0.0])
+    # two states: three actions (the second chosen) and two (the first chosen)
+    score = torch.tensor([1.0, 2.0, 3.0, 0.0, 0.0], requires_grad=True)
+    logp, entropy = _log_probs(score, np.array([0, 0, 0, 1, 1]), np.array([0, 1, 0, 1, 0]), 2)
+    e = np.exp([1.0, 2.0, 3.0])
+    p = e / e.sum()
+    np.testing.assert_allclose(logp.detach().numpy(), [np.log(p[1]), np.log(0.5)], rtol=1e-6)
+    np.testing.assert_allclose(entropy.detach().numpy(), [-(p * np.log(p)).sum(), np.log(2)],
+                               rtol=1e-6)  # fmt: skip
+
+
+def test_a_few_updates_from_the_reward_alone_learn_small_problems(tmp_path):
+    import torch
+
+    from cake_drake.learning.training.planner import _model
+    from cake_drake.learning.training.planner_reward import (
+        RewardRecipe,
+        evaluate,
+        train_planner_reward,
+    )
+
+    before = evaluate(_model(64, 0), (3,), 64, 7)[3][0]
+    info = train_planner_reward(RewardRecipe(steps=40, max_blocks=3, check_sizes=(4,)), tmp_path,
+                                log=lambda _: None)  # fmt: skip
+    p = _model(64, 0)
+    with torch.no_grad(), np.load(tmp_path / "weights.npz") as w:
+        for k in w.files:
+            p[k].copy_(torch.as_tensor(w[k]))
+    after = evaluate(p, (3,), 64, 7)[3][0]
+    # greedy play of 64 three-block problems: from loops to planning
+    assert before < 0.5 and after >= 0.9, (before, after)
+    assert info["labels"].startswith("none: the goal's reward alone")
+
+
+def test_a_planner_trained_from_the_reward_a_few_steps_plans_problem_5_or_refuses(tmp_path):
+    out = tmp_path / "reward"
+    r = _cli("cake_drake.train", "--planner", "--reward", "--out", str(out), "--steps", "20",
+             "--blocks", "2", "4")  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "trained from the reward alone" in r.stdout and f"learned@{out}" in r.stdout
+    cfg = json.loads((out / "planner.json").read_text())
+    assert cfg["training"]["blocks"] == [2, 4] and cfg["training"]["steps"] == 20
+    r = _cli("cake_drake.plan", "--planner", f"learned@{out}")
+    assert r.returncode in (0, 1), r.stderr
+    if r.returncode == 0:
+        assert "from the reward" in r.stdout
+    else:
+        assert r.stderr.count("\n") == 1 and "gave up" in r.stderr
+    r = _cli("cake_drake.plan", str(DATA / "blocks_paint.pddl"), str(PROBLEM_5),
+             "--planner", f"learned@{out}")  # fmt: skip
+    assert r.returncode == 2 and "blocks_paint.pddl" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize(
+    ("flags", "words"),
+    [
+        (["--planner", "--reward", "--blocks", "1", "4"], "--blocks 1 4: the curriculum starts"),
+        (["--planner", "--reward", "--blocks", "3", "30"], "at most 20 blocks"),
+        (["--planner", "--reward", "--steps", "0"], "--steps 0"),
+        (["--reward"], "--reward without --planner"),
+    ],
+)
+def test_a_reward_recipe_that_cannot_train_is_one_line(tmp_path, flags, words):
+    r = _cli("cake_drake.train", *flags, "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()

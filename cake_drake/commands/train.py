@@ -66,7 +66,11 @@ at most %(most)d) is enumerated, each sampled goal's exact distances give every 
 optimal actions, and a relational network learns to put its choice on them (--steps,
 default %(steps)d; --batch-size, default %(batch_size)d; --seed). OUT gets planner.json
 and weights.npz: plan with it as --planner learned@OUT (python -m cake_drake.plan, run,
-a scenario's task.planner).
+a scenario's task.planner). With --reward it learns from the goal's reward alone instead:
+no search labels anything; the network plays random problems in the symbolic model
+(REINFORCE, each episode against its problem's other episodes, a curriculum from 2 blocks
+up to --blocks' MAX, default 12; --batch-size problems an update, default 16), and keeps the
+weights that planned best in greedy checks on 20 and 50 blocks.
 
 --rl SUITE --name TASK learns TASK of the scenario file SUITE from a reward instead, from
 no dataset: Stable-Baselines3's PPO (or SAC) on CakeDrake/Stack-v0 with the task's
@@ -121,6 +125,10 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--planner", action="store_true",
         help="train the symbolic layer's learned planner (exact labels, no dataset)",
+    )  # fmt: skip
+    p.add_argument(
+        "--reward", action="store_true",
+        help="--planner: from the goal's reward alone (policy gradient, a curriculum), no labels",
     )  # fmt: skip
     p.add_argument(
         "--blocks", type=int, nargs=2, metavar=("MIN", "MAX"),
@@ -350,6 +358,8 @@ def _main_planner(args: argparse.Namespace) -> int:
 
     from cake_drake.learning.training.planner import PlannerRecipe, check_recipe, train_planner
 
+    if args.reward:
+        return _main_planner_reward(args)
     if args.dataset:
         raise InputError(f"{args.dataset[0]}: --planner reads no dataset (its labels are "
                          "computed exactly from enumerated states)")  # fmt: skip
@@ -371,6 +381,39 @@ def _main_planner(args: argparse.Namespace) -> int:
         f"{args.out}: learned planner trained {recipe.steps} steps on {info['states']} states "
         f"of {recipe.min_blocks}-{recipe.max_blocks} blocks in {info['minutes']:.1f} min; "
         f"plan with --planner learned@{args.out}"
+    )
+    return EXIT_OK
+
+
+def _main_planner_reward(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
+    from cake_drake.learning.training.planner import FILES
+    from cake_drake.learning.training.planner_reward import (
+        RewardRecipe,
+        check_recipe,
+        train_planner_reward,
+    )
+    from cake_drake.outputs.files import OutputDir
+
+    if args.dataset:
+        raise InputError(f"{args.dataset[0]}: --planner --reward reads no dataset (it learns "
+                         "from the goal's reward in its own episodes)")  # fmt: skip
+    if args.device not in ("auto", "cpu"):
+        raise InputError(f"--device {args.device} with --planner: it trains on the CPU")
+    given = {"steps": args.steps, "problems": args.batch_size, "seed": args.seed}
+    if args.blocks is not None:
+        given.update(min_blocks=args.blocks[0], max_blocks=args.blocks[1])
+    recipe = replace(RewardRecipe(), **{k: v for k, v in given.items() if v is not None})
+    check_recipe(recipe)
+    with OutputDir(args.out, "train --planner --reward", FILES) as staged:
+        info = train_planner_reward(recipe, staged, log=lambda line: print(line, flush=True))
+        staged.commit()
+    print(
+        f"{args.out}: learned planner trained from the reward alone, {recipe.steps} steps, "
+        f"{info['episodes']} episodes ({info['states']} states) of {recipe.min_blocks}-"
+        f"{recipe.max_blocks} blocks in {info['minutes']:.1f} min; plan with --planner "
+        f"learned@{args.out}"
     )
     return EXIT_OK
 
@@ -421,7 +464,7 @@ MODES: tuple[Mode, ...] = (
     Mode(
         chooser="planner",
         whose="the learned planner's",
-        reads=frozenset({"planner", "blocks", "steps", "batch_size", "device", "seed"}),
+        reads=frozenset({"planner", "reward", "blocks", "steps", "batch_size", "device", "seed"}),
         refusal="it is a policy's setting, not the learned planner's",
         main=_main_planner,
     ),

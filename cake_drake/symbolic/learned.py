@@ -672,6 +672,7 @@ def describe(learned: LearnedPlanner) -> str:
     sizes = t.get("blocks") if isinstance(t, dict) else None
     trained = ""
     if isinstance(sizes, list) and len(sizes) == 2:
-        trained = f", trained on {sizes[0]}-{sizes[1]} blocks"
+        how = " from the reward" if isinstance(t, dict) and "reward" in t else ""
+        trained = f", trained{how} on {sizes[0]}-{sizes[1]} blocks"
     where = portable_path(learned.path)
     return f"relational network, width {learned.width}{trained}: {where}"
