@@ -5,7 +5,8 @@ positions held from the measured joints) and prints steps per second: from the s
 one process and in Gymnasium's ``make_vec`` with two processes (spawned: a forked
 renderer hangs), then with the task's two
 96 x 96 cameras rendering every step, the same two ways; and with the pixel policy
-answering every step in one process (what a residual's training steps through).
+answering every step in one process (what a residual's training steps through); then
+``CakeDrake/Skill-v0``, the shipped relative skill answering, one process and two.
 
 ``--runners`` trains PPO from scratch on stack2's state (the task's recipe, ``--steps``
 environment steps a row) with its environments in this process, in two spawned
@@ -104,6 +105,46 @@ def throughput(steps: int) -> None:
             base.reset(env.unwrapped.policy_task, 2 + k)
     rate = steps / (time.perf_counter() - t0)
     print(f"  {'cameras + stack2_pixels':<22} one process      {rate:7.0f} steps/s")
+    skill_throughput(steps)
+
+
+def skill_throughput(steps: int) -> None:
+    """CakeDrake/Skill-v0 (the shipped relative skill's places on 3 to 8 cubes), each step
+    answered by the skill itself: in one process, and in make_vec with two processes.
+    Resets (the lead skill doing the actions before a place) are counted in the time."""
+    import gymnasium
+
+    from cake_drake.learning.policies.relative_skill import RelativeSkill
+
+    skill_id = "cake_drake.gym:CakeDrake/Skill-v0"
+    print(f"CakeDrake/Skill-v0, places of 3 to 8 cubes, the skill's own answers, {steps} steps "
+          "a row (resets included)")  # fmt: skip
+    env = gymnasium.make(skill_id)
+    lead = RelativeSkill(env.unwrapped.skill_path)
+    obs, _ = env.reset(seed=1)
+    t0, episodes = time.perf_counter(), 0
+    for k in range(steps):
+        obs, _, term, trunc, _ = env.step(lead.act({"observation.relative": obs}))
+        if term or trunc:
+            obs, _ = env.reset(seed=2 + k)
+            lead.reset()
+            episodes += 1
+    rate = steps / (time.perf_counter() - t0)
+    print(f"  {'relative skill':<22} one process      {rate:7.0f} steps/s ({episodes} episodes)")
+    venv = gymnasium.make_vec(skill_id, num_envs=2, vectorization_mode="async",
+                              vector_kwargs={"context": "spawn"})  # fmt: skip
+    leads = [RelativeSkill(env.unwrapped.skill_path) for _ in range(2)]
+    obs, _ = venv.reset(seed=1)
+    t0 = time.perf_counter()
+    for _ in range(steps // 2):
+        pairs = zip(leads, obs, strict=True)
+        action = np.stack([s.act({"observation.relative": o}) for s, o in pairs])
+        obs, _, term, trunc, _ = venv.step(action)
+        for k in np.flatnonzero(term | trunc):
+            leads[k].reset()
+    rate = 2 * (steps // 2) / (time.perf_counter() - t0)
+    venv.close()
+    print(f"  {'relative skill':<22} make_vec x 2     {rate:7.0f} steps/s")
 
 
 def runners(steps: int) -> None:

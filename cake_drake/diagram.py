@@ -168,6 +168,7 @@ def _add_reference(
     slots: tuple[tuple[float, float], ...],
     cameras: dict,
     policy=None,
+    skill=None,
 ) -> tuple[ReferenceSource, TimedSolver | None]:
     """The one place that tells a planned reference, a recorded one and a policy apart."""
     ref = scenario.reference
@@ -189,7 +190,8 @@ def _add_reference(
     roles = blocksworld_roles(problem.domain)
     meaning = lambda action: roles.classify(action).canonical()  # noqa: E731
     if scenario.motion.skills:
-        geometric, solver = _add_skills(builder, scenario, scene, indices, q_start, meaning), None
+        geometric = _add_skills(builder, scenario, scene, indices, q_start, meaning, skill)
+        solver = None
     else:
         geometric, solver = _add_waypoint_ik(
             builder, scenario, scene, indices, q_start, meaning, source.HasInputPort("infeasible")
@@ -259,11 +261,11 @@ def _add_waypoint_ik(builder, scenario, scene, indices, q_start, meaning, feedba
     return builder.AddNamedSystem("waypoint_ik", waypoint_ik), solver
 
 
-def _add_skills(builder, scenario, scene, indices, q_start, meaning):
+def _add_skills(builder, scenario, scene, indices, q_start, meaning, skill=None):
     """The learned geometric layer: a skill checkpoint executes each ground action
-    (its adapter through the plug-in door: nothing here imports the learning code); a
-    skill that answers moves of the hand gets the damped least squares a policy's
-    ``ee_delta`` gets."""
+    (its adapter through the plug-in door: nothing here imports the learning code), or
+    ``skill``, an object given (the skill environment's); a skill that answers moves of
+    the hand gets the damped least squares a policy's ``ee_delta`` gets."""
     from cake_drake.geometric.ik import DlsIk
     from cake_drake.plugins import guarded, load_attribute
     from cake_drake.scenario import SKILL_POLICY
@@ -272,8 +274,9 @@ def _add_skills(builder, scenario, scene, indices, q_start, meaning):
     motion = scenario.motion
     label = portable_path(motion.skills)
     path = str(resolve_path(motion.skills))
-    skill = guarded(f"skill {label!r}", load_attribute(SKILL_POLICY, "skill"), path,
-                    motion.skill_device, motion.skill_ensemble)  # fmt: skip
+    if skill is None:
+        skill = guarded(f"skill {label!r}", load_attribute(SKILL_POLICY, "skill"), path,
+                        motion.skill_device, motion.skill_ensemble)  # fmt: skip
     system = LearnedSkills(
         skill,
         label,
@@ -368,6 +371,7 @@ def build_diagram(
     faults=(),
     slots: Sequence[tuple[float, float]] | None = None,
     policy=None,
+    skill=None,
 ) -> CakeDiagram:
     """Wire the action source, geometry and controller around the simulated Panda, for
     ``problem``'s blocks starting at ``initial_poses`` and the planned ``actions``.
@@ -378,6 +382,8 @@ def build_diagram(
     systems here; moves happen in :func:`cake_drake.execution.execute`.
     ``slots`` are the table slots a put-down may use (default: every slot the scenario's
     world holds).
+    ``policy`` is the object a ``!Policy`` reference asks, ``skill`` the object a scenario
+    with ``motion.skills`` asks, in place of the checkpoint they name (the Gym envs').
     """
     controller = make_controller(scenario.controller)
     blocks = list(blocksworld_view(problem).blocks)
@@ -403,6 +409,7 @@ def build_diagram(
         slots,
         cameras,
         policy,
+        skill,
     )
     finger_command = reference.port("finger_state")
     slips = [f.action for f in faults if isinstance(f, Slip)]

@@ -220,16 +220,7 @@ class LearnedSkills(LeafSystem):
         if prog.steps >= self.budget:
             self._set(state, self._end(prog, False))
             return
-        arm = self._arm.Eval(context)
-        hand = self._hand.Eval(context)
-        skill = skill_vector(prog.context, cubes, X_WG)
-        width = hand[0] + hand[1]
-        observation = {
-            "observation.state": np.r_[arm[:7], width].astype(np.float32),
-            "observation.skill": skill,
-            # What a skill that never sees the arm reads: no joint, no absolute height.
-            "observation.relative": relative_vector(skill, width),
-        }
+        observation = self._observe(context, prog.context, cubes, X_WG)
         # Guarded as every plug-in's answer: what it raises, or an answer slower than its
         # budget, stops the run in one line naming the skill.
         raw = guarded(f"skill {self.label!r}", self.skill.act, observation, exit_code=DURING,
@@ -264,6 +255,27 @@ class LearnedSkills(LeafSystem):
         fingers = np.array([width / 2, width / 2, 0.0, 0.0])
         state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
         self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))
+
+    def _observe(self, context, action: SkillContext, cubes, X_WG) -> dict:
+        arm = self._arm.Eval(context)
+        hand = self._hand.Eval(context)
+        skill = skill_vector(action, cubes, X_WG)
+        width = hand[0] + hand[1]
+        return {
+            "observation.state": np.r_[arm[:7], width].astype(np.float32),
+            "observation.skill": skill,
+            # What a skill that never sees the arm reads: no joint, no absolute height.
+            "observation.relative": relative_vector(skill, width),
+        }
+
+    def observe(self, context) -> dict | None:
+        """What the skill reads now about the action under way (None when idle): the
+        skill environment's observation between two of this system's updates."""
+        prog = self.progress(context)
+        if prog.context is None:
+            return None
+        cubes, X_WG, _ = self._measure(context)
+        return self._observe(context, prog.context, cubes, X_WG)
 
     def _start(self, context, prog: SkillProgress, cubes) -> SkillProgress:
         cmd = self._action.Eval(context)

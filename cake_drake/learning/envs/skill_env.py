@@ -1,0 +1,322 @@
+"""``CakeDrake/Skill-v0``: one ground action of a learned skill is an episode.
+
+Reinforcement learning on whole Blocksworld episodes (``CakeDrake/Stack-v0``) pays for
+hundreds of steps before a place is judged; a residual for the last millimetres of a
+place needs only the place. Here an episode is **one ground action** of the learned
+middle, with the skill's own observation and action, in the same Diagram a run with
+``motion.skills`` builds:
+
+- ``reset(seed=...)`` draws a problem as a learning task does (``blocks`` cubes, ``tall``
+  towers, a ``placement`` jitter, cubes of ``cube_mass_range_kg``, the task's
+  ``controller``), plans it with the default planner, and lets the **lead skill** (the
+  checkpoint ``skill``, as under the planner in a run) do the plan's actions until one of
+  the ``actions`` kinds starts at or after a drawn index: the start is a state that
+  learned runs visit, at every height the problems reach. The chosen action's first
+  control period is the lead's too; the episode begins one period into it.
+- the observation is what the skill reads (``observation.relative``, 14 numbers, for a
+  skill that never sees the arm; ``observation.state`` and ``observation.skill``, 21, for
+  one that reads the joints); the action is what it answers (``ee_delta``, 7 numbers, or
+  ``joint_position``, 8), held for one control period.
+- the episode ends (``terminated``) when the action does: its effects hold in the
+  measured world (``info["is_success"]``), a cube leaves the table, or the skill system
+  gives it up after its budget of ``budget`` periods (``truncated``).
+- the reward weighs the terms of :mod:`cake_drake.learning.envs.rewards` (a ``reward``
+  mapping, :class:`cake_drake.scenario.Reward`'s names) read for this one action:
+  ``goal`` and ``success`` 1 at the step its effects hold (``success`` only if a placed
+  cube rests within 5 mm of its target), ``reach`` the hand's nearness to the action's
+  target (the cube for a pick, the place for a place), ``lift`` a picked cube raised (1
+  from one cube's height), ``place`` a held or placed cube's horizontal alignment over
+  its target (1 centred, 0 from 10 mm), ``step`` 1 a step, ``lost`` 1 when a cube leaves
+  the table. ``info["offset_mm"]`` is a place's horizontal offset at its end.
+
+The lead runs in the same simulation, so a start costs the simulated seconds of the
+actions before it; a lead that gives the run up before the chosen action (three failed
+tries) is a draw thrown away, and ``reset`` draws again (at most ``MAX_DRAWS`` times).
+
+    import gymnasium
+    env = gymnasium.make("cake_drake.gym:CakeDrake/Skill-v0", blocks=(3, 6))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces as gs
+from pydrake.systems.analysis import Simulator
+
+from cake_drake.diagram import build_diagram
+from cake_drake.errors import ExecutionError, InputError
+from cake_drake.learning.envs import rewards
+from cake_drake.learning.envs.env import _blocks
+from cake_drake.paths import MODELS_DIR, resolve_path
+from cake_drake.pipeline import check, plan_and_layout
+from cake_drake.policy import spaces
+from cake_drake.policy.observations import RELATIVE_SIZE, SKILL_SIZE
+from cake_drake.scenario import Generate, Reward, Scenario
+from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
+from cake_drake.systems.skills import DEFAULT_BUDGET, SKILL_SPACES
+from cake_drake.world.facts import STACK_TOL
+from cake_drake.world.scene import CUBE_SIZE, Placement, set_world_parameters
+
+#: The skill a skill environment leads with unless told: the shipped one that never sees
+#: the arm.
+DEFAULT_SKILL = MODELS_DIR / "policies" / "skills_relative"
+#: The kinds of ground action an episode may be (the exercise's names).
+ACTION_KINDS = ("pick-up", "unstack", "put-down", "stack")
+PLACES = ("put-down", "stack")
+#: Draws of a start ``reset`` makes before it gives up (each a problem and an index).
+MAX_DRAWS = 20
+#: A cube this far below the table's top has left the table.
+LOST_Z = -0.05
+
+
+class HeldSkill:
+    """The skill the Diagram asks: the lead's answers until the episode's action has
+    begun, then the action the environment was given."""
+
+    def __init__(self, lead) -> None:
+        self.lead = lead
+        self.action_space = getattr(lead, "action_space", "joint_position")
+        self.action = None  # set by step(); None: the lead answers
+        self.label = "the action given to CakeDrake/Skill-v0's step()"
+
+    def reset(self) -> None:
+        self.lead.reset()
+
+    def act(self, observation):
+        if self.action is None:
+            return self.lead.act(observation)
+        return self.action
+
+
+def _kinds(actions) -> tuple[str, ...]:
+    if isinstance(actions, str):
+        actions = {"places": PLACES, "picks": ("pick-up", "unstack"), "all": ACTION_KINDS}.get(
+            actions, (actions,)
+        )
+    kinds = tuple(actions)
+    bad = [a for a in kinds if a not in ACTION_KINDS]
+    if not kinds or bad:
+        raise InputError(
+            f"actions = {actions!r:.60}: the kinds of action an episode may be, from "
+            f"{', '.join(ACTION_KINDS)} (or places, picks, all)"
+        )
+    return kinds
+
+
+class SkillEnv(gymnasium.Env):
+    """See the module's docstring."""
+
+    metadata = {"render_modes": [], "render_fps": 10}
+
+    def __init__(
+        self,
+        skill: str = str(DEFAULT_SKILL),
+        blocks: int | tuple[int, int] = (3, 8),
+        tall: bool = False,
+        actions: str | Sequence[str] = "places",
+        placement: tuple[float, float] = (0.02, 20.0),
+        cube_mass_range_kg: Sequence[float] = (),
+        controller=None,
+        reward: Mapping | None = None,
+        budget: int = DEFAULT_BUDGET,
+        rate_hz: float = 10.0,
+        time_step: float = 0.01,
+    ) -> None:
+        from cake_drake.learning.policies import skills
+
+        self.blocks, self.kinds = _blocks(blocks), _kinds(actions)
+        if not isinstance(tall, bool):
+            raise InputError(f"tall = {tall!r:.40}: true or false")
+        if self.blocks[1] < 2 and set(self.kinds) <= {"stack", "unstack"}:
+            raise InputError(
+                f"actions = {actions!r:.40} with blocks = {blocks!r:.24}: no problem of one "
+                "cube has a stack or an unstack, so no episode could start; give more blocks"
+            )
+        whole = isinstance(budget, int | np.integer) and not isinstance(budget, bool)
+        if not (whole and 1 <= budget <= 10_000):
+            raise InputError(f"budget = {budget!r:.24}: control periods an action may take, "
+                             "a whole number from 1 to 10000")  # fmt: skip
+        self.tall, self.budget, self.rate_hz, self.time_step = tall, int(budget), rate_hz, time_step
+        self.placement, self.cube_mass_range_kg, self.controller = (
+            placement, cube_mass_range_kg, controller,
+        )  # fmt: skip
+        self.reward = rewards.check_reward(Reward() if reward is None else reward, "reward")
+        self.skill_path = str(resolve_path(skill))
+        skills.check_folder(resolve_path(skill))  # one line for a folder that is no skill
+        self.relative = skills._relative(resolve_path(skill))
+        self._lead = skills.make(self.skill_path)
+        space = getattr(self._lead, "action_space", "joint_position")
+        self.control_mode = space
+        size = RELATIVE_SIZE if self.relative else 8 + SKILL_SIZE
+        self.observation_space = gs.Box(-np.inf, np.inf, (size,), np.float32)
+        if space == "ee_delta":
+            low, high = spaces.bounds("ee_delta", {}, None, None)
+        else:
+            from cake_drake.geometric.ik import Kinematics
+
+            kin = Kinematics()
+            low, high = spaces.bounds("joint_position", {}, kin.lower, kin.upper)
+        assert len(low) == SKILL_SPACES[space]
+        self.action_space = gs.Box(low.astype(np.float32), high.astype(np.float32),
+                                   dtype=np.float32)  # fmt: skip
+        # The same check a run gets, before make() returns: field names as a scenario's.
+        check(self._scenario(0, self.blocks[0]), write=False)
+        self._simulator = None
+
+    # --- the episode --------------------------------------------------------------------
+
+    def _scenario(self, seed: int, blocks: int) -> Scenario:
+        s = Scenario() if self.controller is None else Scenario(controller=self.controller)
+        s.task.generate = Generate(blocks=blocks, seed=seed, tall=self.tall)
+        s.motion = replace(
+            s.motion, skills=self.skill_path, skill_rate_hz=self.rate_hz,
+            skill_max_steps=self.budget,
+            skill_action_space="relative" if self.relative else "",
+        )  # fmt: skip
+        s.world.time_step = self.time_step
+        try:
+            xy, yaw_deg = self.placement
+        except (TypeError, ValueError):
+            raise InputError(
+                f"placement = {self.placement!r:.40}: (xy in m, yaw in degrees)"
+            ) from None
+        s.world.placement = Placement(xy=xy, yaw_deg=yaw_deg)
+        try:
+            s.world.cube_mass_range_kg = [float(m) for m in self.cube_mass_range_kg]
+        except (TypeError, ValueError):
+            raise InputError(
+                f"cube_mass_range_kg = {self.cube_mass_range_kg!r:.40}: [lo, hi] kg or empty"
+            ) from None
+        s.outputs.render = False
+        s.seed = seed
+        return s
+
+    def _vector(self, o: dict) -> np.ndarray:
+        if self.relative:
+            return np.asarray(o["observation.relative"], np.float32)
+        return np.concatenate([o["observation.state"], o["observation.skill"]]).astype(np.float32)
+
+    def _try(self, seed: int) -> bool:
+        """Lead the drawn problem up to its chosen action; False where no start comes."""
+        rng = np.random.default_rng(seed)
+        blocks = int(rng.integers(self.blocks[0], self.blocks[1] + 1))
+        scenario = self._scenario(seed, blocks)
+        checked = check(scenario, write=False)
+        view = blocksworld_view(checked.problem)
+        if view.goal <= view.init:
+            return False
+        plan, slots, initial = plan_and_layout(checked)
+        roles = blocksworld_roles(checked.problem.domain)
+        kinds = [roles.classify(a).canonical().name for a in plan.actions]
+        eligible = [k for k, name in enumerate(kinds) if name in self.kinds]
+        if not eligible:
+            return False
+        first = int(rng.choice(eligible))
+        self._held = HeldSkill(self._lead)
+        self._cake = build_diagram(scenario, checked.problem, initial, plan.actions,
+                                   slots=slots, skill=self._held)  # fmt: skip
+        self._system = self._cake.diagram.GetSubsystemByName("skills")
+        self._simulator = Simulator(self._cake.diagram)
+        scene = self._cake.scene
+        root = self._simulator.get_mutable_context()
+        set_world_parameters(scene, scene.plant.GetMyMutableContextFromRoot(root),
+                             scenario.world, scenario.seed)  # fmt: skip
+        self._simulator.Initialize()
+        self._t = 0
+        starts = 0
+        while True:
+            self._t += 1
+            self._simulator.AdvanceTo(self._t / self.rate_hz)
+            prog = self._progress()
+            if prog.error is not None:
+                return False
+            if prog.working >= 0 and prog.steps == 1:  # an action has just begun
+                starts += 1
+                if prog.working >= first and prog.context.schema in self.kinds:
+                    break
+            if prog.done >= len(plan.actions) + 3 or self._t > 600 * self.rate_hz:
+                return False
+        self._done, self._succeeded = prog.done, prog.succeeded
+        self._ctx, self._schema = prog.context, prog.context.schema
+        self._steps = 0
+        self._start_z = self._cubes()[self._ctx.cube].translation()[2]
+        return True
+
+    def _progress(self):
+        context = self._system.GetMyContextFromRoot(self._simulator.get_context())
+        return self._system.progress(context)
+
+    def _cubes(self):
+        scene = self._cake.scene
+        ctx = scene.plant.GetMyContextFromRoot(self._simulator.get_context())
+        return {n: scene.plant.EvalBodyPoseInWorld(ctx, scene.cube_body(n)) for n in scene.cubes}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        for _ in range(MAX_DRAWS):
+            if self._try(int(self.np_random.integers(0, 2**31 - 1))):
+                return self._observe(ended=False)
+        raise ExecutionError(
+            f"CakeDrake/Skill-v0: no start in {MAX_DRAWS} draws (the lead skill "
+            f"{self.skill_path} gave each run up before a {'/'.join(self.kinds)} action)"
+        )
+
+    def step(self, action):
+        if self._simulator is None:
+            raise RuntimeError("call reset() before step()")
+        self._held.action = np.asarray(action, np.float64)
+        self._t += 1
+        self._simulator.AdvanceTo(self._t / self.rate_hz)
+        self._steps += 1
+        prog = self._progress()
+        ended = prog.done > self._done or prog.error is not None
+        obs, info = self._observe(ended, prog)
+        terminated = info["unrecoverable"] or (ended and not info["timed_out"])
+        truncated = not terminated and (info["timed_out"] or self._steps >= self.budget)
+        return obs, info["reward"], terminated, truncated, info
+
+    # --- what the learner sees ----------------------------------------------------------
+
+    def _observe(self, ended: bool, prog=None):
+        prog = prog or self._progress()
+        o = self._system.observe(self._system.GetMyContextFromRoot(self._simulator.get_context()))
+        if o is None:  # the action is over: what the skill read last stands
+            o = self._last_obs
+        self._last_obs = o
+        skill = np.asarray(o["observation.skill"], np.float64)
+        cubes = self._cubes()
+        ctx, place = self._ctx, self._schema in PLACES
+        held = ended and prog.succeeded > self._succeeded
+        at = cubes[ctx.cube].translation()
+        offset = 0.0
+        if place:
+            below = ctx.target if ctx.other is None else cubes[ctx.other].translation()
+            offset = float(np.hypot(*(at[:2] - np.asarray(below)[:2])))
+        lost = any(p.translation()[2] < LOST_Z for p in cubes.values())
+        success = held and (not place or offset <= STACK_TOL)
+        # the hand's distance to the cube (a pick) or to the place (observation.skill)
+        to = skill[8:11] if place else skill[4:7]
+        values = {
+            "goal": float(held),
+            "success": float(success),
+            "reach": float(1.0 - np.tanh(np.linalg.norm(to) / rewards.REACH_RANGE)),
+            "lift": 0.0 if place else float(np.clip((at[2] - self._start_z) / CUBE_SIZE, 0, 1)),
+            "place": max(0.0, 1.0 - offset / rewards.PLACE_RANGE) if place else 0.0,
+            "step": 1.0,
+            "lost": float(lost),
+        }
+        info = {
+            "reward": rewards.weighted(self.reward, values),
+            "reward_terms": values,
+            "is_success": bool(success),
+            "unrecoverable": bool(lost),
+            "timed_out": bool(ended and not held),
+            "action": self._schema,
+            "offset_mm": 1000.0 * offset if place else None,
+            "steps": self._steps,
+        }
+        return self._vector(o), info
