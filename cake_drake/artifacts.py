@@ -18,6 +18,8 @@ skill      a LeRobot checkpoint whose      the geometric layer (a skill per grou
 relative_  ``skill.json``,                 the geometric layer, never seeing the arm
 skill      ``weights.npz``                 (hand moves with IK below, the gripper as
                                            a decision)
+skill_rl   ``skill_rl.json``,              the same, a relative skill with an RL
+           ``model.zip``                   residual on its hand moves
 policy     any other LeRobot checkpoint    the symbolic and geometric layers (a
            (``config.json``,               whole-task policy)
            ``model.safetensors``)
@@ -76,6 +78,9 @@ KINDS: dict[str, Kind] = {
         Kind("relative_skill", "a skill that never sees the arm (skill.json)", "geometric",
              f"{_POLICIES}.relative_skill:check_folder", f"{_POLICIES}.relative_skill:make",
              f"{_POLICIES}.relative_skill:describe"),
+        Kind("skill_rl", "a skill with an RL residual (skill_rl.json)", "geometric",
+             f"{_POLICIES}.skill_rl:check_folder", f"{_POLICIES}.skill_rl:make",
+             f"{_POLICIES}.skill_rl:describe"),
         Kind("policy", "a whole-task policy (a LeRobot checkpoint)", "symbolic + geometric",
              f"{_POLICIES}.lerobot_checkpoint:check_folder",
              f"{_POLICIES}.lerobot_checkpoint:CheckpointPolicy",
@@ -85,9 +90,9 @@ KINDS: dict[str, Kind] = {
 
 #: The file that says a folder is of a kind, for the kinds that have one of their own.
 MARKERS = {"rl": "rl.json", "planner": "planner.json", "residual": "residual.json",
-           "relative_skill": "skill.json"}  # fmt: skip
+           "relative_skill": "skill.json", "skill_rl": "skill_rl.json"}  # fmt: skip
 #: The kinds that are the geometric layer (``motion.skills``, ``evaluate``'s skills).
-SKILL_KINDS = ("skill", "relative_skill")
+SKILL_KINDS = ("skill", "relative_skill", "skill_rl")
 
 
 def lerobot_folder(path: Path) -> Path | None:
@@ -119,7 +124,7 @@ def detect(path: str | Path) -> Kind:
         raise InputError(
             f"{path}: not a LeRobot checkpoint (no config.json and model.safetensors here, "
             "nor in checkpoints/last/pretrained_model), nor another learned part (rl.json, "
-            "planner.json, residual.json, skill.json)"
+            "planner.json, residual.json, skill.json, skill_rl.json)"
         )
     config = read_json_mapping(folder / "config.json", "a LeRobot policy's config")
     inputs = config.get("input_features")
@@ -166,7 +171,8 @@ def describe(path: str | Path) -> str:
 
 def _kinds_said() -> str:
     return ("rl.json (RL), planner.json (a learned planner), residual.json (a residual), "
-            "skill.json (a skill that never sees the arm), or a LeRobot checkpoint: "
+            "skill.json (a skill that never sees the arm), skill_rl.json (one with an RL "
+            "residual), or a LeRobot checkpoint: "
             "config.json and model.safetensors")  # fmt: skip
 
 

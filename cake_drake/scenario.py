@@ -268,6 +268,10 @@ class RlRecipe:
     log_std: float = -1.0
     #: An episode's step budget (0: the task's ``reference.max_steps``).
     max_steps: int = 0
+    #: A skill residual's held-out checks: every this many steps (0: none), on this many
+    #: places, without exploration; the best check's model is the one kept.
+    eval_every: int = 0
+    eval_episodes: int = 20
     reward: Reward = field(default_factory=Reward)
 
 

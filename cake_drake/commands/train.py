@@ -340,10 +340,23 @@ def _main_rl(args: argparse.Namespace) -> int:
              "envs": args.envs}  # fmt: skip
     recipe = rl.check_recipe(replace(recipe, **{k: v for k, v in given.items() if v is not None}))
     cluster = ray_engine(args.ray, recipe.envs)  # an address nothing answers at: refused here
-    with OutputDir(args.out, "train --rl", rl.FILES, [args.rl]) as staged:
-        info = rl.train_rl(scenario, args.name, staged, recipe, args.seed,
-                           log=lambda line: print(line, flush=True), cluster=cluster)  # fmt: skip
+    if scenario.motion.skills:  # a residual on a skill, one place an episode
+        from cake_drake.learning.policies.skill_rl import FILES
+        from cake_drake.learning.training.skill_rl import train_skill_rl as train
+    else:
+        FILES, train = rl.FILES, rl.train_rl
+    with OutputDir(args.out, "train --rl", FILES, [args.rl]) as staged:
+        info = train(scenario, args.name, staged, recipe, args.seed,
+                     log=lambda line: print(line, flush=True), cluster=cluster)  # fmt: skip
         staged.commit()
+    if info["kind"] == "skill_residual":
+        kept = info["checks"][-1] if info["checks"] else None
+        said = "" if kept is None else (f"; held-out places without exploration at the end: "
+                                        f"{kept['placed']}/{kept['of']}")  # fmt: skip
+        print(f"{args.out}: skill + RL residual ({info['algorithm'].upper()}) on "
+              f"{args.name}, {info['steps']} steps in {info['minutes']:.1f} min "
+              f"({info['steps_per_s']:.0f} steps/s), {info['kept']}{said}")  # fmt: skip
+        return EXIT_OK
     won, of = info["last_episodes_success"]
     print(
         f"{args.out}: {rl.KIND_LABELS[info['kind']]} ({info['algorithm'].upper()}) on "

@@ -47,9 +47,15 @@ def action_space_of(config: dict) -> str | None:
 
 
 def _relative(path: Path) -> bool:
-    """Whether ``path`` holds a skill that never sees the arm (``skill.json``)."""
+    """Whether ``path`` holds a skill that never sees the arm (``skill.json``, or
+    ``skill_rl.json``: one with an RL residual)."""
     kind = artifacts.kind_of(path)
-    return kind is not None and kind.name == "relative_skill"
+    return kind is not None and kind.name in ("relative_skill", "skill_rl")
+
+
+def _with_rl(path: Path) -> bool:
+    kind = artifacts.kind_of(path)
+    return kind is not None and kind.name == "skill_rl"
 
 
 def check_folder(path: Path, device: str = "cpu", action_space: str = "") -> Path:
@@ -67,6 +73,11 @@ def check_folder(path: Path, device: str = "cpu", action_space: str = "") -> Pat
         if device not in ("cpu", "auto"):
             raise InputError(f"{path}: a skill that never sees the arm acts in NumPy on the "
                              f"CPU; motion.skill_device: cpu, not {device}")  # fmt: skip
+        if _with_rl(path):
+            from cake_drake.learning.policies import skill_rl
+
+            skill_rl.check_folder(path)
+            return path
         return relative_skill.check_folder(path)
     if action_space == RELATIVE:
         artifacts.require(path, *artifacts.SKILL_KINDS, role="motion.skills")
@@ -134,6 +145,10 @@ class CheckpointSkill:
 
 def describe(path: str | Path) -> str:
     """What the skill at ``path`` reads and answers, for a run's ``layers``."""
+    if _with_rl(Path(path)):
+        from cake_drake.learning.policies import skill_rl
+
+        return skill_rl.describe(path)
     if _relative(Path(path)):
         return relative_skill.describe(path)
     config = read_checkpoint(model_folder(Path(path)))
@@ -145,6 +160,10 @@ def make(path: str, device: str = "cpu", ensemble: float = 0.0):
     """The plug-in's factory (``motion.skills``: a skill's folder; ``ensemble``:
     ``motion.skill_ensemble``, for a checkpoint's action chunks): a skill that never sees
     the arm, or a LeRobot skill checkpoint."""
+    if _with_rl(Path(path)):
+        from cake_drake.learning.policies import skill_rl
+
+        return skill_rl.ResidualSkill(path)
     if _relative(Path(path)):
         return relative_skill.RelativeSkill(path)
     return CheckpointSkill(path, device, ensemble)

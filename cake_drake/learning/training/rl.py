@@ -143,6 +143,8 @@ def check_recipe(recipe: RlRecipe) -> RlRecipe:
     _whole(recipe.rollout, 8, 1_000_000, f"{w}.rollout")
     _whole(recipe.epochs, 1, 100, f"{w}.epochs")
     _whole(recipe.max_steps, 0, 1_000_000, f"{w}.max_steps")
+    _whole(recipe.eval_every, 0, 100_000_000, f"{w}.eval_every")
+    _whole(recipe.eval_episodes, 1, 10_000, f"{w}.eval_episodes")
     steps = recipe.steps
     if not isinstance(steps, int) or isinstance(steps, bool) or steps < 1:
         raise InputError(f"{w}.steps = {steps!r:.24}: a whole number of environment steps, "
@@ -221,9 +223,12 @@ def _callback(progress: Progress, every: int):
     return Callback()
 
 
-def draw_curve(rows: list[dict], path: Path, title: str, window: int = 50) -> None:
+def draw_curve(
+    rows: list[dict], path: Path, title: str, window: int = 50, checks: list | None = None
+) -> None:
     """Success (over the last ``window`` episodes, drawn from the tenth on) and return
-    against environment steps."""
+    against environment steps; ``checks``, (steps, success %) measured without
+    exploration, as points on the success panel."""
     import matplotlib  # its pyplot: a second's import, only for the figure
 
     matplotlib.use("Agg")
@@ -242,6 +247,11 @@ def draw_curve(rows: list[dict], path: Path, title: str, window: int = 50) -> No
         top.plot(steps[full], (100 * (cum_w[k + 1] - cum_w[start]) / n)[full], color="C2")
         bottom.plot(steps, ret, ".", color="C0", alpha=0.25, ms=3)
         bottom.plot(steps[full], ((cum_r[k + 1] - cum_r[start]) / n)[full], color="C0")
+    if checks:
+        x, y = zip(*checks, strict=True)
+        top.plot(x, y, "o-", color="C3", ms=4, label="held-out, no exploration")
+        top.plot([], [], color="C2", label=f"training episodes (last {window})")
+        top.legend(fontsize=8, loc="lower right")
     top.set_ylim(-2, 102)
     top.set_ylabel(f"success, last {window} episodes (%)")
     bottom.set_ylabel("episode return")
