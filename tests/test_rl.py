@@ -534,3 +534,39 @@ def test_the_shipped_residual_names_its_base_and_runs_its_scenario(tmp_path):
     assert r.returncode == 0 and "goal reached: a on b" in r.stdout + r.stderr, r.stderr
     layers = json.loads((tmp_path / "rl" / "summary.json").read_text())["layers"]
     assert "imitation + RL residual, PPO" in layers["geometric"]["what"]
+
+
+@pytest.mark.slow
+def test_sigterm_to_a_training_on_two_environments_ends_it_in_one_line(tmp_path):
+    """A scheduler's stop (SIGTERM to the command alone): exit 130 at once, OUT never made,
+    the environments' processes gone. (An interrupt between two environments' answers to a
+    step once left Stable-Baselines3's close() waiting on a pipe forever.)"""
+    import signal
+    import time
+
+    text = TINY.format(base="").replace("envs: 1", "envs: 2").replace("steps: 128", "steps: 100000")
+    (tmp_path / "tiny.yaml").write_text(text)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.train", "--rl", "tiny.yaml", "--name", "tiny",
+         "--out", "o"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 300
+    line = proc.stdout.readline()  # the first progress line: the environments are stepping
+    assert "steps/s" in line or time.monotonic() > deadline, line
+    os.kill(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.count("\n") == 1, err
+    assert not (tmp_path / "o").exists()
+    gone = time.monotonic() + 30
+    while time.monotonic() < gone:
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    else:
+        os.killpg(proc.pid, signal.SIGKILL)
+        pytest.fail("the environments' processes were left running")

@@ -264,6 +264,23 @@ def draw_curve(
     plt.close(fig)
 
 
+def close_envs(venv, finished: bool) -> None:
+    """Close a training's vectorised environments. After an error or an interrupt
+    (``finished`` false) the worker processes are stopped, not asked: an interrupt that
+    lands between two workers' answers to a step leaves Stable-Baselines3's ``close()``
+    waiting for an answer that never comes."""
+    inner = venv.unwrapped
+    processes = getattr(inner, "processes", None)
+    if finished or not processes:
+        venv.close()
+        return
+    for process in processes:
+        process.terminate()
+    for process in processes:
+        process.join(timeout=10)
+    inner.closed = True
+
+
 def _model(recipe: RlRecipe, venv, seed: int, residual: bool):
     import torch  # torch and Stable-Baselines3 below: seconds, only where a model is made
 
@@ -351,12 +368,14 @@ def train_rl(
     venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=recipe.gamma)
     progress = Progress(log)
     kind = "residual" if base else "scratch"
+    finished = False
     try:
         model = _model(recipe, venv, seed, bool(base))
         every = max(recipe.rollout * recipe.envs, 1000)
         model.learn(total_timesteps=recipe.steps, callback=_callback(progress, every))
+        finished = True
     finally:
-        venv.close()
+        close_envs(venv, finished)
     steps = int(model.num_timesteps)
     minutes = (time.perf_counter() - progress.t0) / 60.0
     progress.log(steps)  # the last line, where the callback did not print it

@@ -31,7 +31,14 @@ from cake_drake.errors import InputError
 from cake_drake.learning.envs.skill_env import SkillEnv
 from cake_drake.learning.policies import skill_rl
 from cake_drake.learning.policies.relative_skill import INPUT, RelativeSkill
-from cake_drake.learning.training.rl import Progress, _callback, _model, check_recipe, draw_curve
+from cake_drake.learning.training.rl import (
+    Progress,
+    _callback,
+    _model,
+    check_recipe,
+    close_envs,
+    draw_curve,
+)
 from cake_drake.scenario import RlRecipe, portable_path, resolve_path
 from cake_drake.systems.skills import DEFAULT_BUDGET
 
@@ -166,6 +173,7 @@ def train_skill_rl(
             check_now(self.model, self.num_timesteps)
             return True
 
+    finished = False
     try:
         model = _model(recipe, venv, seed, residual=True)
         if eval_every:
@@ -175,8 +183,9 @@ def train_skill_rl(
         if eval_every:
             callbacks.append(EveryNTimesteps(eval_every, Check()))
         model.learn(total_timesteps=recipe.steps, callback=CallbackList(callbacks))
+        finished = True
     finally:
-        venv.close()
+        close_envs(venv, finished)
         evaluator.close()
     steps = int(model.num_timesteps)
     if eval_every and checks[-1]["steps"] != steps:
