@@ -8,10 +8,13 @@ middle, with the skill's own observation and action, in the same Diagram a run w
 
 - ``reset(seed=...)`` draws a problem as a learning task does (``blocks`` cubes, ``tall``
   towers, a ``placement`` jitter, cubes of ``cube_mass_range_kg``, the task's
-  ``controller``), plans it with the default planner, and lets the **lead skill** (the
+  ``controller``), plans it with ``planner`` (the learned planner unless told: a
+  hundredth of a second where an optimal search of eight cubes takes seconds, and its
+  plans as short), and lets the **lead skill** (the
   checkpoint ``skill``, as under the planner in a run) do the plan's actions until one of
-  the ``actions`` kinds starts at or after a drawn index: the start is a state that
-  learned runs visit, at every height the problems reach. The chosen action's first
+  the ``actions`` kinds starts at or after an index drawn among the plan's first
+  ``horizon`` actions: the start is a state that learned runs visit, at the heights the
+  problems' towers have. The chosen action's first
   control period is the lead's too; the episode begins one period into it.
 - the observation is what the skill reads (``observation.relative``, 14 numbers, for a
   skill that never sees the arm; ``observation.state`` and ``observation.skill``, 21, for
@@ -31,7 +34,9 @@ middle, with the skill's own observation and action, in the same Diagram a run w
 
 The lead runs in the same simulation, so a start costs the simulated seconds of the
 actions before it; a lead that gives the run up before the chosen action (three failed
-tries) is a draw thrown away, and ``reset`` draws again (at most ``MAX_DRAWS`` times).
+tries), or takes more than ``LEAD_PERIODS`` control periods an action to reach it, is a
+draw thrown away, and ``reset`` draws again (at most ``MAX_DRAWS`` times): the starts
+are those of the lead's runs that go well.
 
     import gymnasium
     env = gymnasium.make("cake_drake.gym:CakeDrake/Skill-v0", blocks=(3, 6))
@@ -69,6 +74,9 @@ ACTION_KINDS = ("pick-up", "unstack", "put-down", "stack")
 PLACES = ("put-down", "stack")
 #: Draws of a start ``reset`` makes before it gives up (each a problem and an index).
 MAX_DRAWS = 20
+#: Control periods the lead may take, on average, for each action before the chosen one
+#: (a pick or a place of the lead's takes 40 to 50): past them, the draw is given up.
+LEAD_PERIODS = 80
 #: A cube this far below the table's top has left the table.
 LOST_Z = -0.05
 
@@ -125,6 +133,8 @@ class SkillEnv(gymnasium.Env):
         budget: int = DEFAULT_BUDGET,
         rate_hz: float = 10.0,
         time_step: float = 0.01,
+        planner: str = "learned",
+        horizon: int = 6,
     ) -> None:
         from cake_drake.learning.policies import skills
 
@@ -144,6 +154,11 @@ class SkillEnv(gymnasium.Env):
         self.placement, self.cube_mass_range_kg, self.controller = (
             placement, cube_mass_range_kg, controller,
         )  # fmt: skip
+        self.planner = planner
+        if not (isinstance(horizon, int) and not isinstance(horizon, bool) and horizon >= 1):
+            raise InputError(f"horizon = {horizon!r:.24}: the plan's first actions an episode "
+                             "may start at, a whole number from 1")  # fmt: skip
+        self.horizon = horizon
         self.reward = rewards.check_reward(Reward() if reward is None else reward, "reward")
         self.skill_path = str(resolve_path(skill))
         skills.check_folder(resolve_path(skill))  # one line for a folder that is no skill
@@ -172,6 +187,7 @@ class SkillEnv(gymnasium.Env):
     def _scenario(self, seed: int, blocks: int) -> Scenario:
         s = Scenario() if self.controller is None else Scenario(controller=self.controller)
         s.task.generate = Generate(blocks=blocks, seed=seed, tall=self.tall)
+        s.task.planner = self.planner
         s.motion = replace(
             s.motion, skills=self.skill_path, skill_rate_hz=self.rate_hz,
             skill_max_steps=self.budget,
@@ -212,7 +228,7 @@ class SkillEnv(gymnasium.Env):
         plan, slots, initial = plan_and_layout(checked)
         roles = blocksworld_roles(checked.problem.domain)
         kinds = [roles.classify(a).canonical().name for a in plan.actions]
-        eligible = [k for k, name in enumerate(kinds) if name in self.kinds]
+        eligible = [k for k, name in enumerate(kinds[: self.horizon]) if name in self.kinds]
         if not eligible:
             return False
         first = int(rng.choice(eligible))
@@ -238,7 +254,9 @@ class SkillEnv(gymnasium.Env):
                 starts += 1
                 if prog.working >= first and prog.context.schema in self.kinds:
                     break
-            if prog.done >= len(plan.actions) + 3 or self._t > 600 * self.rate_hz:
+            # A lead that struggles (repeats, replans) is not waited for: this draw is
+            # given up once it has taken LEAD_PERIODS a planned action up to the chosen one.
+            if self._t > (first + 1) * LEAD_PERIODS:
                 return False
         self._done, self._succeeded = prog.done, prog.succeeded
         self._ctx, self._schema = prog.context, prog.context.schema
