@@ -17,6 +17,8 @@ table, with the machine:
 
     python benchmarks/learned_planner.py                       # 100 problems a size
     python benchmarks/learned_planner.py --problems 10 --sizes 3 6 12   # quick
+    python benchmarks/learned_planner.py --planners learned learned@models/planners/blocks_reward \
+        --figure docs/images/planner_reward.png    # imitation against reward, drawn
 """
 
 from __future__ import annotations
@@ -77,7 +79,9 @@ def main(argv=None) -> int:
     ap.add_argument("--time-limit", type=float, default=30.0, help="s per plan")
     ap.add_argument("--astar-limit", type=float, default=10.0, help="s per A* plan")
     ap.add_argument("--learned", default="learned", help="learned or learned@DIR")
+    ap.add_argument("--figure", help="PNG: each planner's share solved and length / best by size")
     args = ap.parse_args(argv)
+    drawn: dict[str, list[tuple[int, float, float]]] = {}
     planners = [args.learned if p == "learned" else p for p in args.planners]
     print(machine())
     print(f"{args.problems} problems a size (seeds {FIRST_SEED}+), {args.time_limit:g} s a plan\n")
@@ -125,7 +129,43 @@ def main(argv=None) -> int:
             t_max = f"{max(times):.3f} s" if times else "-"
             print(f"| {n} | {p} | {solved} | {mean(ratio_opt)} | {mean(ratio_best)} | "
                   f"{t_med} | {t_max} |", flush=True)  # fmt: skip
+            share = len(got) / len(cases)
+            drawn.setdefault(p, []).append(
+                (n, share, statistics.fmean(ratio_best) if ratio_best else float("nan"))
+            )
+    if args.figure:
+        figure(drawn, args.figure)
     return 0
+
+
+def figure(drawn: dict[str, list[tuple[int, float, float]]], path: str) -> None:
+    """Two panels against the number of blocks: the share solved and length / best."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    for p, rows in drawn.items():
+        n, share, ratio = zip(*rows, strict=True)
+        label = {"learned": "imitation (planners/blocks)"}.get(p, p.replace("learned@models/", ""))
+        if label.endswith("blocks_reward"):
+            label = "reward alone (planners/blocks_reward)"
+        a.plot(n, [100 * x for x in share], "o-", label=label)
+        b.plot(n, ratio, "o-", label=label)
+    a.set(xlabel="blocks", ylabel="problems solved (%)", ylim=(0, 105), xscale="log",
+          title="solved, held-out problems")  # fmt: skip
+    b.set(xlabel="blocks", ylabel="plan length / shortest found", xscale="log",
+          title="plan length")  # fmt: skip
+    for ax in (a, b):
+        ax.set_xticks(sorted({n for rows in drawn.values() for n, _, _ in rows}))
+        ax.get_xaxis().set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        ax.get_xaxis().set_minor_locator(matplotlib.ticker.NullLocator())
+        ax.grid(alpha=0.3)
+    a.legend(loc="lower left")  # one legend: the right panel's lines cross where it would be
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
 
 
 if __name__ == "__main__":
