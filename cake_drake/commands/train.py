@@ -350,9 +350,10 @@ def _main_rl(args: argparse.Namespace) -> int:
                      log=lambda line: print(line, flush=True), cluster=cluster)  # fmt: skip
         staged.commit()
     if info["kind"] == "skill_residual":
-        kept = info["checks"][-1] if info["checks"] else None
-        said = "" if kept is None else (f"; held-out places without exploration at the end: "
-                                        f"{kept['placed']}/{kept['of']}")  # fmt: skip
+        step = info["kept"].rsplit(" ", 1)[-1]
+        kept = next((c for c in info["checks"] if str(c["steps"]) == step), None)
+        said = "" if kept is None else (f" ({kept['placed']}/{kept['of']} held-out places "
+                                        f"within 5 mm, {kept['p95_mm']:.2f} mm p95)")  # fmt: skip
         print(f"{args.out}: skill + RL residual ({info['algorithm'].upper()}) on "
               f"{args.name}, {info['steps']} steps in {info['minutes']:.1f} min "
               f"({info['steps_per_s']:.0f} steps/s), {info['kept']}{said}")  # fmt: skip
