@@ -207,9 +207,17 @@ def test_rl_flags_without_rl_and_rl_with_a_dataset_are_refused(tmp_path):
     one_line(r, 2, "--rl reads no dataset")
     r = cake("train", "--rl", str(LEARNING), "--out", str(tmp_path / "o"))
     one_line(r, 2, "without --name")
+    # a planned task with learned skills trains a skill residual: its base must be one
     r = cake("train", "--rl", str(LEARNING), "--name", "learned_tower5", "--out",
              str(tmp_path / "o"))  # fmt: skip
-    one_line(r, 2, "learned_tower5: RL trains a task whose reference is a !Policy")
+    base = "package://cake_drake/policies/stack2_pixels"
+    one_line(r, 2, f"learned_tower5: training.rl.base {base}: a skill residual corrects")
+    (tmp_path / "p.yaml").write_text(
+        'plain:\n  task: {problem: "package://cake_drake/pddl/stack2.pddl"}\n'
+    )
+    r = cake("train", "--rl", str(tmp_path / "p.yaml"), "--name", "plain", "--out",
+             str(tmp_path / "o"))  # fmt: skip
+    one_line(r, 2, "plain: RL trains a task whose reference is a !Policy")
 
 
 def test_without_stable_baselines3_rl_is_refused_with_the_line_that_installs_it(tmp_path):

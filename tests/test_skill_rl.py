@@ -136,5 +136,5 @@ def test_a_skill_residual_on_a_skill_that_reads_the_arm_is_refused(tmp_path):
     )
     r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "out", cwd=tmp_path)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
-    assert "corrects a skill that never sees the arm" in r.stderr
+    assert "training.rl.base" in r.stderr and "corrects a skill that never sees the arm" in r.stderr
     assert not (tmp_path / "out").exists()

@@ -128,8 +128,10 @@ def train_skill_rl(
     recipe = check_recipe(recipe)
     base_path = resolve_path(recipe.base or scenario.motion.skills)
     if not skills._relative(base_path) or skills._with_rl(base_path):
-        raise InputError(f"{label}: a skill residual corrects a skill that never sees the arm "
-                         f"(skill.json); {portable_path(base_path)} is not one")  # fmt: skip
+        where = "training.rl.base" if recipe.base else "motion.skills"
+        raise InputError(f"{label}: {where} {portable_path(base_path)}: a skill residual "
+                         "corrects a skill that never sees the arm (skill.json), and this is "
+                         "not one")  # fmt: skip
     skills.check_folder(base_path)
     base = str(base_path)
     torch.set_num_threads(1)
