@@ -150,7 +150,7 @@ def skill_throughput(steps: int) -> None:
 def runners(steps: int) -> None:
     import tempfile
 
-    from cake_drake.learning.training.rl import check_recipe, train_rl
+    from cake_drake.learning.training.rl import FILES, check_recipe, train_rl
     from cake_drake.outputs.files import OutputDir
     from cake_drake.scenario import load_scenario
     from cake_drake.sweeps import RayCluster
@@ -165,7 +165,7 @@ def runners(steps: int) -> None:
         recipe = check_recipe(replace(base, envs=envs))
         cluster = RayCluster(num_cpus=envs) if ray else None
         with tempfile.TemporaryDirectory() as tmp:
-            with OutputDir(Path(tmp) / "o", "benchmark", ("rl.json",)) as out:
+            with OutputDir(Path(tmp) / "o", "benchmark", FILES) as out:
                 info = train_rl(scenario, "stack2", out, recipe, log=lambda line: None,
                                 cluster=cluster)  # fmt: skip
         print(f"  {what:<20} x {envs}  {info['steps_per_s']:7.1f} steps/s")
