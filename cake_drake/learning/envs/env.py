@@ -127,6 +127,23 @@ def _cameras(cameras) -> list[Camera]:
     return out
 
 
+def set_world(s: Scenario, time_step: float, placement, cube_mass_range_kg) -> None:
+    """An environment's world arguments into the scenario ``s`` (checked later by the same
+    ``check`` a scenario gets); one line naming the argument where one is no such value."""
+    s.world.time_step = time_step
+    try:
+        xy, yaw_deg = placement
+    except (TypeError, ValueError):
+        raise InputError(f"placement = {placement!r:.40}: (xy in m, yaw in degrees)") from None
+    s.world.placement = Placement(xy=xy, yaw_deg=yaw_deg)
+    try:
+        s.world.cube_mass_range_kg = [float(m) for m in cube_mass_range_kg]
+    except (TypeError, ValueError):
+        raise InputError(
+            f"cube_mass_range_kg = {cube_mass_range_kg!r:.40}: [lo, hi] kg or empty"
+        ) from None
+
+
 class StackEnv(gymnasium.Env):
     """See the module's docstring."""
 
@@ -217,20 +234,7 @@ class StackEnv(gymnasium.Env):
             max_steps=1_000_000,  # the environment keeps the budget (``step``)
             options=self.options,
         )
-        s.world.time_step = self.time_step
-        try:
-            xy, yaw_deg = self.placement
-        except (TypeError, ValueError):
-            raise InputError(
-                f"placement = {self.placement!r:.40}: (xy in m, yaw in degrees)"
-            ) from None
-        s.world.placement = Placement(xy=xy, yaw_deg=yaw_deg)
-        try:
-            s.world.cube_mass_range_kg = [float(m) for m in self.cube_mass_range_kg]
-        except (TypeError, ValueError):
-            raise InputError(
-                f"cube_mass_range_kg = {self.cube_mass_range_kg!r:.40}: [lo, hi] kg or empty"
-            ) from None
+        set_world(s, self.time_step, self.placement, self.cube_mass_range_kg)
         s.cameras = list(self.cameras)
         s.outputs.render = False
         s.seed = seed

@@ -55,7 +55,7 @@ from pydrake.systems.analysis import Simulator
 from cake_drake.diagram import build_diagram
 from cake_drake.errors import ExecutionError, InputError
 from cake_drake.learning.envs import rewards
-from cake_drake.learning.envs.env import _blocks
+from cake_drake.learning.envs.env import _blocks, set_world
 from cake_drake.paths import MODELS_DIR, resolve_path
 from cake_drake.pipeline import check, plan_and_layout
 from cake_drake.policy import spaces
@@ -64,7 +64,7 @@ from cake_drake.scenario import Generate, Reward, Scenario
 from cake_drake.symbolic.roles import blocksworld_roles, blocksworld_view
 from cake_drake.systems.skills import DEFAULT_BUDGET, SKILL_SPACES
 from cake_drake.world.facts import STACK_TOL
-from cake_drake.world.scene import CUBE_SIZE, Placement, set_world_parameters
+from cake_drake.world.scene import CUBE_SIZE, set_world_parameters
 
 #: The skill a skill environment leads with unless told: the shipped one that never sees
 #: the arm.
@@ -193,20 +193,7 @@ class SkillEnv(gymnasium.Env):
             skill_max_steps=self.budget,
             skill_action_space="relative" if self.relative else "",
         )  # fmt: skip
-        s.world.time_step = self.time_step
-        try:
-            xy, yaw_deg = self.placement
-        except (TypeError, ValueError):
-            raise InputError(
-                f"placement = {self.placement!r:.40}: (xy in m, yaw in degrees)"
-            ) from None
-        s.world.placement = Placement(xy=xy, yaw_deg=yaw_deg)
-        try:
-            s.world.cube_mass_range_kg = [float(m) for m in self.cube_mass_range_kg]
-        except (TypeError, ValueError):
-            raise InputError(
-                f"cube_mass_range_kg = {self.cube_mass_range_kg!r:.40}: [lo, hi] kg or empty"
-            ) from None
+        set_world(s, self.time_step, self.placement, self.cube_mass_range_kg)
         s.outputs.render = False
         s.seed = seed
         return s

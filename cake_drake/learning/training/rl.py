@@ -264,6 +264,28 @@ def draw_curve(
     plt.close(fig)
 
 
+def vec_env(factory, recipe: RlRecipe, cluster=None):
+    """The recipe's ``envs`` environments made by ``factory``: Ray actors on ``cluster``,
+    in this process (one), or in spawned processes; returns scaled for the value
+    function's sake while training (what is saved acts on raw observations, which are
+    not normalised, so nothing else is needed to run it)."""
+    if cluster is not None:
+        from cake_drake.learning.envs.ray_runners import ray_vec_env
+
+        venv = ray_vec_env(factory, recipe.envs, cluster)
+    elif recipe.envs == 1:
+        from stable_baselines3.common.vec_env import DummyVecEnv
+
+        venv = DummyVecEnv([factory])
+    else:
+        from stable_baselines3.common.vec_env import SubprocVecEnv
+
+        venv = SubprocVecEnv([factory] * recipe.envs, start_method="spawn")
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    return VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=recipe.gamma)
+
+
 def close_envs(venv, finished: bool) -> None:
     """Close a training's vectorised environments. After an error or an interrupt
     (``finished`` false) the worker processes are stopped, not asked: an interrupt that
@@ -349,23 +371,7 @@ def train_rl(
         spec = replace(spec, cameras=())
     torch.set_num_threads(1)  # the environments have the other cores
     factory = partial(learner_env, spec, recipe, base)
-    if cluster is not None:
-        from cake_drake.learning.envs.ray_runners import ray_vec_env
-
-        venv = ray_vec_env(factory, recipe.envs, cluster)
-    elif recipe.envs == 1:
-        from stable_baselines3.common.vec_env import DummyVecEnv
-
-        venv = DummyVecEnv([factory])
-    else:
-        from stable_baselines3.common.vec_env import SubprocVecEnv
-
-        venv = SubprocVecEnv([factory] * recipe.envs, start_method="spawn")
-    from stable_baselines3.common.vec_env import VecNormalize
-
-    # Returns scaled for the value function's sake while training; what is saved acts on
-    # raw observations (they are not normalised), so nothing else is needed to run it.
-    venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=recipe.gamma)
+    venv = vec_env(factory, recipe, cluster)
     progress = Progress(log)
     kind = "residual" if base else "scratch"
     finished = False

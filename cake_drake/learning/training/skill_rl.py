@@ -38,6 +38,7 @@ from cake_drake.learning.training.rl import (
     check_recipe,
     close_envs,
     draw_curve,
+    vec_env,
 )
 from cake_drake.scenario import RlRecipe, portable_path, resolve_path
 from cake_drake.systems.skills import DEFAULT_BUDGET
@@ -136,22 +137,9 @@ def train_skill_rl(
     base = str(base_path)
     torch.set_num_threads(1)
     factory = partial(learner_env, scenario, recipe, base)
-    if cluster is not None:
-        from cake_drake.learning.envs.ray_runners import ray_vec_env
-
-        venv = ray_vec_env(factory, recipe.envs, cluster)
-    elif recipe.envs == 1:
-        from stable_baselines3.common.vec_env import DummyVecEnv
-
-        venv = DummyVecEnv([factory])
-    else:
-        from stable_baselines3.common.vec_env import SubprocVecEnv
-
-        venv = SubprocVecEnv([factory] * recipe.envs, start_method="spawn")
+    venv = vec_env(factory, recipe, cluster)
     from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EveryNTimesteps
-    from stable_baselines3.common.vec_env import VecNormalize
 
-    venv = VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=recipe.gamma)
     progress = Progress(log)
     eval_every, eval_episodes = recipe.eval_every, recipe.eval_episodes
     checks: list[dict] = []
