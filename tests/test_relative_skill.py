@@ -166,6 +166,67 @@ def test_a_pick_aims_the_hand_and_a_place_aims_the_held_cube():
     np.testing.assert_allclose(rs.target_from_hand(v), [0.05, -0.02, -0.10, 0.1])
     v[1], v[3] = 0.0, 1.0  # stack
     np.testing.assert_allclose(rs.target_from_hand(v), [0.05, -0.02, -0.088, 0.2])
+    # Once the fingers have let go, the hand goes up over the place to the transit height
+    # (12): a target that holds still, where the released cube (format 1's) is no target.
+    v[12], v[rs.WIDTH] = 0.22, 0.08
+    np.testing.assert_allclose(rs.target_from_hand(v), [0.05, -0.02, 0.22, 0.2])
+    np.testing.assert_allclose(rs.target_from_hand(v, up_after_release=False),
+                               [0.05, -0.02, -0.088, 0.2])  # fmt: skip
+
+
+def test_a_format_1_skill_is_acted_as_it_was_trained(tmp_path):
+    folder = write_skill(tmp_path / "s")
+    assert rs.RelativeSkill(folder).up_after_release
+    meta = json.loads((folder / "skill.json").read_text())
+    (folder / "skill.json").write_text(json.dumps({**meta, "format": 1}))
+    assert not rs.RelativeSkill(folder).up_after_release
+    (folder / "skill.json").write_text(json.dumps({**meta, "format": 3}))
+    with pytest.raises(InputError, match=r"skill.json: format 3; this cake_drake reads 1 or 2"):
+        rs.RelativeSkill(folder)
+
+
+def test_training_varies_only_what_leaves_the_answer_where_it_was():
+    """The trainer's augmentation moves a held cube in the fingers and a descending
+    hand's transit height, and changes the label only as much as keeps the answer in the
+    world the same: the held cube set where it was set, the hand sent where it was sent."""
+    from cake_drake.learning.training import relative_skill as training
+
+    place = np.zeros(RELATIVE_SIZE)
+    place[3], place[4:7], place[7] = 1.0, [0.001, -0.002, -0.001], 0.05  # stack, held
+    place[8:11], place[11], place[12], place[13] = [0.001, 0.0005, -0.03], 0.02, 0.2, 0.04
+    descent = np.zeros(RELATIVE_SIZE)  # a pick going down onto its cube
+    descent[0], descent[4:7], descent[13] = 1.0, [0.001, 0.0, -0.12], 0.08
+    descent[8:11], descent[12] = [0.001, 0.0, 0.15], 0.15  # above the cube, at transit
+    crossing, at_transit = descent.copy(), descent.copy()
+    crossing[8:10] = [0.05, 0.02]  # not over its cube yet: how high it goes matters
+    at_transit[10] = at_transit[12] = 0.004  # level with the transit height
+    kinds = [place, descent, crossing, at_transit]
+    x = np.concatenate([np.tile(np.r_[v, v], (300, 1)) for v in kinds])  # n_obs 2
+    moves = np.tile([0.002, -0.001, 0.004, 0.01], (len(x), 1))
+    x2, moves2 = training.augment(x, moves, np.random.default_rng(1))
+    assert np.array_equal(x[:, :14], x[:, 14:]) and np.array_equal(x2[:, :14], x2[:, 14:])
+    now, now2 = x[:, 14:], x2[:, 14:]
+    changed = np.any(x2 != x, axis=1)
+    rows = np.arange(len(x)) // 300
+    for k in (0, 1):  # about half of each varied; the others not at all
+        assert 0.35 < changed[rows == k].mean() < 0.65
+    assert not changed[rows >= 2].any() and np.array_equal(moves2[rows >= 2], moves[rows >= 2])
+    # The place: the held cube moved in the fingers by up to GRASP_JITTER; it is set where
+    # it was (hand's target + the cube in the hand), its label untouched.
+    p = rows == 0
+    assert np.abs(now2[p, 4:8] - now[p, 4:8]).max() <= training.GRASP_JITTER.max()
+    assert np.abs(now2[p, 6] - now[p, 6]).max() > 0.008
+    set_at = lambda v, m: rs.target_from_hand(v)[:, :3] + m[:, :3] + v[:, 4:7]  # noqa: E731
+    np.testing.assert_allclose(set_at(now2[p], moves2[p]), set_at(now[p], moves[p]), atol=1e-12)
+    np.testing.assert_array_equal(moves2[p], moves[p])
+    # The descent: the transit height anywhere from TRANSIT_CLEAR above the hand up; the
+    # pick's target rose with it and its move fell as much: the hand goes where it went.
+    d = rows == 1
+    assert now2[d, 12].min() >= training.TRANSIT_CLEAR - 1e-12
+    assert now2[d, 12].max() > 0.3 and now2[d, 12].min() < 0.1
+    np.testing.assert_allclose(now2[d, 10] - now2[d, 12], now[d, 10] - now[d, 12])
+    sent = lambda v, m: rs.target_from_hand(v) + m  # noqa: E731
+    np.testing.assert_allclose(sent(now2[d], moves2[d]), sent(now[d], moves[d]), atol=1e-12)
 
 
 def test_the_hand_keeps_to_its_target_while_the_fingers_move(tmp_path):

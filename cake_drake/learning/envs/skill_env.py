@@ -182,6 +182,13 @@ class SkillEnv(gymnasium.Env):
         check(self._scenario(0, self.blocks[0]), write=False)
         self._simulator = None
 
+    @property
+    def lead(self):
+        """The lead skill (the checkpoint ``skill``, loaded): it does the plan's actions up
+        to the episode's, and has answered the episode's first control period; asked on,
+        it answers the rest of the action as it would in a run."""
+        return self._lead
+
     # --- the episode --------------------------------------------------------------------
 
     def _scenario(self, seed: int, blocks: int) -> Scenario:

@@ -36,22 +36,41 @@ from cake_drake.policy.observations import RELATIVE_SIZE
 
 #: What ``skill.json`` says a folder is.
 KIND = "relative_skill"
-FORMAT = 1
+#: The format a training writes: 2, where a place whose fingers have let go of the cube
+#: answers from the point above the place at the transit height. Format 1 (the first
+#: trainings) answered it from the hand, and is read as it was trained.
+FORMAT = 2
+FORMATS = (1, 2)
 INPUT = "observation.relative"
 #: What the network answers, in this order, then the gripper's logit: the hand's next
 #: target from the action's target (m, world axes; rad about z).
 MOVES = ("dx", "dy", "dz", "dyaw")
 
 
-def target_from_hand(relative: np.ndarray) -> np.ndarray:
+#: ``observation.relative``'s gripper width.
+WIDTH = 13
+#: m: fingers wider than this hold no cube (a cube is 0.04 across; open, 0.08).
+LET_GO = 0.06
+
+
+def target_from_hand(relative: np.ndarray, up_after_release: bool = True) -> np.ndarray:
     """The move of the hand that takes what the action moves onto its target, (..., 4):
-    x y z and yaw. A pick or an unstack moves the hand: onto its target (above the cube,
+    x y z and yaw, from ``observation.relative`` (..., 14). A pick or an unstack moves
+    the hand: onto its target (above the cube at the transit height,
     ``observation.skill``'s 8-10), turned as the cube is (7). A place moves the held
     cube: onto where it is to rest (8-10 less the cube from the hand, 4-6), turned as the
-    target says (11 less 7), however the cube sits in the fingers."""
+    target says (11 less 7), however the cube sits in the fingers; once the fingers have
+    let go of it (wider than ``LET_GO``), the hand goes up: its target is the point above
+    the place at the transit height (8-9, and 12) — with ``up_after_release`` false, as
+    format 1 had it, the cube that no longer moves with the hand (the answer then is a
+    move from the hand, which a learner copies as a crawl)."""
     relative = np.asarray(relative)
     picking = (relative[..., 0] + relative[..., 1] > 0.5)[..., None]  # pick-up, unstack
     place_xyz = relative[..., 8:11] - relative[..., 4:7]
+    if up_after_release:
+        released = (relative[..., WIDTH] > LET_GO)[..., None]
+        above = np.concatenate([relative[..., 8:10], relative[..., 12:13]], axis=-1)
+        place_xyz = np.where(released, above, place_xyz)
     place_yaw = (relative[..., 11] - relative[..., 7] + np.pi / 4) % (np.pi / 2) - np.pi / 4
     xyz = np.where(picking, relative[..., 8:11], place_xyz)
     yaw = np.where(picking[..., 0], relative[..., 7], place_yaw)
@@ -61,8 +80,6 @@ def target_from_hand(relative: np.ndarray) -> np.ndarray:
 #: The gripper's decision: closed when its probability passes this, open below 1 - this.
 THRESHOLD = 0.6
 MAX_FILE_BYTES = 16 * 2**20
-#: ``observation.relative``'s gripper width.
-WIDTH = 13
 #: m the fingers' width may change in a step and count as still: while they move on a new
 #: decision, the hand keeps to its target from before it (as the demonstrator's does).
 FINGERS_STILL = 0.0005
@@ -112,8 +129,9 @@ def _read_meta(folder: Path) -> dict:
         said = meta.get("kind") if isinstance(meta, dict) else meta
         raise InputError(f"{path}: kind {said!r:.40}; a skill that never sees the arm says "
                          f"kind: {KIND}")  # fmt: skip
-    if meta.get("format") != FORMAT:
-        raise InputError(f"{path}: format {meta.get('format')!r}; this cake_drake reads {FORMAT}")
+    if meta.get("format") not in FORMATS:
+        raise InputError(f"{path}: format {meta.get('format')!r}; this cake_drake reads "
+                         f"{' or '.join(map(str, FORMATS))}")  # fmt: skip
     if meta.get("input") != INPUT or meta.get("input_size") != RELATIVE_SIZE:
         raise InputError(
             f"{path}: reads {meta.get('input')!r} of {meta.get('input_size')!r} numbers; this "
@@ -191,6 +209,7 @@ class RelativeSkill:
         self.move_mean, self.move_std = w["move_mean"], w["move_std"]
         self.n_obs = int(self.meta["n_obs_steps"])
         self.threshold = float(threshold or self.meta["gripper"].get("threshold", THRESHOLD))
+        self.up_after_release = self.meta["format"] >= 2
         self.reset()
 
     def reset(self) -> None:
@@ -199,6 +218,9 @@ class RelativeSkill:
         self._width: float | None = None
         self._waited: int | None = None  # steps since the decision changed, while waiting
         self._last: np.ndarray | None = None  # the answer before it changed
+        #: The gripper head's last probability that the gripper should be closed (None
+        #: before the action's first answer): what the decision was made from.
+        self.p_closed: float | None = None
 
     def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The moves and the gripper's probability of closed for inputs ``x`` (B, n_obs *
@@ -216,7 +238,8 @@ class RelativeSkill:
             self._seen = [now] * self.n_obs
         self._seen = [*self._seen[1:], now]
         moves, p_closed = self.forward(np.concatenate(self._seen)[None])
-        closed = decide(float(p_closed[0]), self._closed, self.threshold)
+        self.p_closed = float(p_closed[0])
+        closed = decide(self.p_closed, self._closed, self.threshold)
         width = float(now[WIDTH])
         if self._closed is not None and closed != self._closed:
             self._waited = 0
@@ -231,7 +254,7 @@ class RelativeSkill:
         # While the fingers move on a new decision, the hand keeps to where it was going
         # before it (the cube it grasps, the place it lets go): no lift before the grip.
         # The hand's target, answered from the action's target, as a move from the hand.
-        dx, dy, dz, dyaw = self._last + target_from_hand(now)
+        dx, dy, dz, dyaw = self._last + target_from_hand(now, self.up_after_release)
         return np.array([dx, dy, dz, 0.0, 0.0, dyaw, 0.0 if self._closed else 1.0])
 
 

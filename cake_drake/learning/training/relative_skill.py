@@ -8,7 +8,9 @@ frames with no action under way are not a skill's). Each frame gives the network
 two targets: the demonstrator's move of the hand (dx dy dz dyaw, standardised; an L1
 loss, as the other policies') and whether its gripper was closed (a binary
 cross-entropy on one logit: :func:`losses`). The recording's joints are never read.
-Torch trains it on the CPU; the folder is written through the output transaction.
+Each batch is varied where the answer does not change (:func:`augment`: a cube held off
+centre, the transit height in a final descent). Torch trains it on the CPU; the folder
+is written through the output transaction.
 """
 
 from __future__ import annotations
@@ -35,6 +37,19 @@ LOOKAHEAD = 5
 GRIP_LOOKAHEAD = 1
 #: m from where a motion ends at which the hand counts as arrived there.
 ARRIVED = 0.003
+#: How far :func:`augment` moves a held cube in the fingers, at most (x, y, z in m; yaw
+#: in rad).
+GRASP_JITTER = np.array([0.004, 0.004, 0.012, 0.1])
+#: How much :func:`augment` widens or narrows the fingers on a held cube, at most (m).
+GRIP_JITTER = 0.002
+#: How far :func:`augment` raises the transit height of a frame in a final descent, at
+#: most (m); it lowers it down to ``TRANSIT_CLEAR`` above the hand.
+TRANSIT_RAISE = 0.3
+TRANSIT_CLEAR = 0.01
+#: m from above its target at which a hand counts as descending onto it.
+ABOVE = 0.003
+#: The share of a batch's frames :func:`augment` may vary.
+AUGMENTED = 0.5
 
 
 def read_frames(root: Path) -> dict[str, np.ndarray]:
@@ -116,7 +131,7 @@ def examples(
     # would hold it there) and, at the end of a motion, exactly where it ends.
     # The heading looks no further than the gripper's next change: the hand goes to the
     # cube and stays there until the fingers have closed, whatever comes after.
-    onto = rs.target_from_hand(frames["skill"])  # the move onto the target
+    onto = rs.target_from_hand(relative)  # the move onto the target
     headed = frames["action"][:, MOVE_COLUMNS] - onto
     grip = frames["action"][:, GRIPPER_COLUMN] < 0.5
     phase = new.copy()
@@ -141,6 +156,59 @@ def examples(
     ahead = np.where(changes, np.minimum(phase_end, action_end - 1), ahead)
     closed = grip[ahead[rows]].astype(np.float64)
     return x, moves, closed
+
+
+def augment(x: np.ndarray, moves: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
+    """A batch of examples (``x`` as :func:`examples` gives them, (B, n_obs * 14); their
+    ``moves``, (B, 4)) varied where the demonstrator's answer does not change, so that
+    what does not matter is seen to vary (a share ``AUGMENTED`` of the frames, each
+    observation of a frame alike). Copies; the inputs are untouched.
+
+    - **The grasp.** In a place whose fingers hold the cube, the cube is moved in the
+      fingers (``GRASP_JITTER``): the answer is where the held cube goes, from where it
+      is to rest (:func:`cake_drake.learning.policies.relative_skill.target_from_hand`),
+      the same wherever it sits, and the fingers' width on it is varied by up to
+      ``GRIP_JITTER``. Every demonstrated grasp is centred to a millimetre, and the
+      fingers close on every cube to a tenth of one: a cube held a centimetre low, or
+      fingers a millimetre narrower, would otherwise be a scene no frame showed (the
+      width, which tells a held cube from a let-go one, was read to a tenth of a
+      millimetre, and a hand stopped over its place on a millimetre's difference).
+    - **The transit height in a final descent.** Once the hand is over its target (a
+      cube to grasp, or the held cube over its place) and going down to it, how high the
+      towers elsewhere are does not change where it goes: the transit height
+      (``observation.skill``'s 12, and a pick's target, 10, which is up at it) is moved
+      anywhere from ``TRANSIT_CLEAR`` above the hand to ``TRANSIT_RAISE`` higher, a pick's
+      move less what its target rose. Demonstrations of tall towers alone otherwise
+      teach a hand far below its transit height that it is still high above its place:
+      it stops short over a low one."""
+    x, moves = np.array(x, np.float64), np.array(moves, np.float64)
+    size = rs.WIDTH + 1
+    steps = x.shape[1] // size
+    now = x[:, -size:]
+    chosen = rng.random(len(x)) < AUGMENTED
+    width = now[:, rs.WIDTH]
+    picking = now[:, 0] + now[:, 1] > 0.5
+    holding = ~picking & (width < rs.LET_GO)
+    reaching = picking & (width > rs.LET_GO)  # a pick's fingers open
+    # The grasp: any frame of a place whose fingers hold the cube.
+    rows = np.flatnonzero(chosen & holding)
+    shift = rng.uniform(-1.0, 1.0, (len(rows), 4)) * GRASP_JITTER
+    grip = rng.uniform(-GRIP_JITTER, GRIP_JITTER, len(rows))
+    # The final descent: over the target, below the transit height, before the gripper's
+    # change (a pick's fingers open, a place's closed on its cube).
+    over = np.linalg.norm(rs.target_from_hand(now)[:, :2], axis=1) < ABOVE
+    descending = chosen & over & (now[:, 12] > TRANSIT_CLEAR) & (holding | reaching)
+    down = np.flatnonzero(descending)
+    lowest = np.min(x[down][:, 12::size], axis=1)  # the hand's highest in the history
+    rise = rng.uniform(TRANSIT_CLEAR - lowest, TRANSIT_RAISE)
+    up = picking[down]
+    for k in range(steps):
+        x[rows, k * size + 4 : k * size + 8] += shift
+        x[rows, k * size + rs.WIDTH] += grip
+        x[down, k * size + 12] += rise
+        x[down[up], k * size + 10] += rise[up]
+    moves[down[up], 2] -= rise[up]
+    return x, moves
 
 
 def losses(moves_std, logit, target_std, closed):
@@ -180,8 +248,10 @@ def train_relative(
         )
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    in_mean, in_std = x.mean(0), np.maximum(x.std(0), 1e-3)
-    move_mean, move_std = moves.mean(0), np.maximum(moves.std(0), 1e-4)
+    # The scales are those of the varied examples (a centimetre off is no outlier).
+    seen_x, seen_moves = augment(x, moves, rng)
+    in_mean, in_std = seen_x.mean(0), np.maximum(seen_x.std(0), 1e-3)
+    move_mean, move_std = seen_moves.mean(0), np.maximum(seen_moves.std(0), 1e-4)
     layers: list[nn.Module] = []
     width = x.shape[1]
     for hidden in hidden_dims:
@@ -193,14 +263,19 @@ def train_relative(
     sched = torch.optim.lr_scheduler.LambdaLR(
         opt, lambda s: 0.01 + 0.99 * 0.5 * (1 + math.cos(math.pi * min(s / steps, 1.0)))
     )
-    xs = torch.as_tensor((x - in_mean) / in_std, dtype=torch.float32)
-    ys = torch.as_tensor((moves - move_mean) / move_std, dtype=torch.float32)
     cs = torch.as_tensor(closed, dtype=torch.float32)
+
+    def standard(rows):
+        bx, bm = augment(x[rows], moves[rows], rng)
+        return (torch.as_tensor((bx - in_mean) / in_std, dtype=torch.float32),
+                torch.as_tensor((bm - move_mean) / move_std, dtype=torch.float32))  # fmt: skip
+
     shown = max(steps // 10, 1)
     for step in range(1, steps + 1):
-        idx = torch.as_tensor(rng.integers(0, len(xs), batch_size))
-        out_t = net(xs[idx])
-        move, grip = losses(out_t[:, :-1], out_t[:, -1], ys[idx], cs[idx])
+        idx = rng.integers(0, len(x), batch_size)
+        bx, by = standard(idx)
+        out_t = net(bx)
+        move, grip = losses(out_t[:, :-1], out_t[:, -1], by, cs[idx])
         loss = move + grip
         opt.zero_grad()
         loss.backward()
@@ -210,7 +285,7 @@ def train_relative(
             progress(f"step {step}/{steps}: move L1 {move.item():.4f} (std), "
                      f"gripper BCE {grip.item():.4f}")  # fmt: skip
     with torch.no_grad():
-        out_all = net(xs)
+        out_all = net(torch.as_tensor((x - in_mean) / in_std, dtype=torch.float32))
         decided = (torch.sigmoid(out_all[:, -1]) >= 0.5).numpy()
     accuracy = float(np.mean(decided == (closed > 0.5)))
     minutes = (time.perf_counter() - t0) / 60
@@ -223,6 +298,9 @@ def train_relative(
         "gripper": {"head": "closed_logit", "threshold": rs.THRESHOLD},
         "lookahead_frames": LOOKAHEAD,
         "grip_lookahead_frames": GRIP_LOOKAHEAD,
+        "augmented": {"share": AUGMENTED, "grasp_jitter": GRASP_JITTER.tolist(),
+                      "grip_jitter_m": GRIP_JITTER,
+                      "transit_raise_m": TRANSIT_RAISE},
         "trained": trained,
         "recipe": {"steps": steps, "batch_size": batch_size, "lr": lr, "seed": seed,
                    "recording": str(root), "frames": len(x)},
