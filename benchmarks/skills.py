@@ -21,6 +21,13 @@ and the failures by their first words; ``--json`` keeps the rows.
     python benchmarks/skills.py                          # 50 episodes a row (hours)
     python benchmarks/skills.py --episodes 10 --rows problem_5 tall8   # a quick look
     python benchmarks/skills.py --skills package://cake_drake/policies/skills --no-classical
+    python benchmarks/skills.py --release docs/images/skill_release.png   # the release, drawn
+
+``--release PNG`` draws, instead of the table, the gripper's decision over one held-out
+put-down (``CakeDrake/Skill-v0`` on a generated problem, seed ``--seed``): the head's
+probability that the gripper should be closed, the band where the last decision is held,
+the decision, the fingers' width, and the cube's and the hand's height above where the
+cube is to rest.
 """
 
 from __future__ import annotations
@@ -95,8 +102,17 @@ def main(argv=None) -> int:
     ap.add_argument("--no-classical", action="store_true", help="skip the classical column")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", type=Path, help="also write every episode's row here")
+    ap.add_argument(
+        "--release",
+        type=Path,
+        metavar="PNG",
+        help="draw the gripper's decision over one held-out put-down instead",
+    )
+    ap.add_argument("--seed", type=int, default=FIRST_SEED, help="--release's put-down")
     args = ap.parse_args(argv)
     print(machine())
+    if args.release:
+        return release(args.skills, args.seed, args.release)
     rows = args.rows or rows_named(args.sizes, args.tall)
     columns = [("learned skills", args.skills)] + ([] if args.no_classical else
                                                    [("classical", "")])  # fmt: skip
@@ -125,6 +141,69 @@ def main(argv=None) -> int:
                   f"| {said_places} | {sim:.1f} | {said} |", flush=True)  # fmt: skip
     if args.json:
         args.json.write_text(json.dumps(done, indent=1) + "\n")
+    return 0
+
+
+def release(skills: str, seed: int, png: Path) -> int:
+    """Run one put-down of ``skills`` (a skill that never sees the arm) in
+    ``CakeDrake/Skill-v0`` with the skill's own answers, and draw its gripper's decision."""
+    import gymnasium
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cake_drake.learning.policies.relative_skill import INPUT, WIDTH
+
+    env = gymnasium.make("cake_drake.gym:CakeDrake/Skill-v0", skill=skills, blocks=(3, 6),
+                         actions="put-down")  # fmt: skip
+    skill = env.unwrapped.lead  # the lead has begun the put-down: it goes on answering
+    if not hasattr(skill, "p_closed"):
+        print(f"--release: {skills} decides no gripper; a skill that never sees the arm does")
+        return 2
+    obs, _ = env.reset(seed=seed)
+    frames, ended, info = [], False, {}
+    while not ended:
+        action = skill.act({INPUT: obs})
+        # observation.relative: the cube from the hand (4-6), where it rests from it (8-10)
+        frames.append((skill.p_closed, action[6] < 0.5, 1000 * obs[WIDTH],
+                       1000 * (obs[6] - obs[10]), -1000 * obs[10]))  # fmt: skip
+        obs, _, terminated, truncated, info = env.step(action)
+        ended = terminated or truncated
+    env.close()
+    p, closed, width, cube, hand = map(np.array, zip(*frames, strict=True))
+    t = (1 + np.arange(len(p))) / env.unwrapped.rate_hz  # the episode begins a period in
+    opened = t[np.argmax(~closed)] if (~closed).any() else None
+    fig, (top, low) = plt.subplots(2, 1, sharex=True, figsize=(7.5, 5.2))
+    threshold = skill.threshold
+    top.axhspan(1 - threshold, threshold, color="0.9", label="the last decision is held")
+    top.plot(t, p, color="C0", marker=".", label="p(closed), the gripper head")
+    top.step(t, closed.astype(float), where="post", color="C3", label="decision: closed")
+    top.set_ylim(-0.05, 1.05)
+    top.set_ylabel("probability / decision")
+    top.legend(loc="center left", fontsize=8)
+    low.plot(t, width, color="C2", label="fingers' width (mm)")
+    low.plot(t, cube, color="C1", label="the cube above its rest (mm)")
+    low.plot(t, hand, color="C0", ls=":", label="the hand above the cube's rest (mm)")
+    low.set_xlabel("time since the put-down began (s)")
+    low.set_ylabel("mm")
+    low.legend(loc="upper right", fontsize=8)
+    for ax in (top, low):
+        if opened is not None:
+            ax.axvline(opened, color="0.4", ls="--", lw=0.8)
+        ax.grid(alpha=0.3)
+    offset = info.get("offset_mm")
+    if offset is None:
+        verdict = "the cube never set down"
+    else:
+        verdict = (f"the cube set down {offset:.1f} mm off its place ("
+                   + ("placed" if info.get("is_success") else "not placed: more than 5 mm")
+                   + ")")  # fmt: skip
+    fig.suptitle(f"The release: one held-out put-down (seed {seed})\n{verdict}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    when = f"opened at {opened:.1f} s" if opened is not None else "never opened"
+    print(f"{png}: {len(p)} periods, {when}, {verdict}")
     return 0
 
 

@@ -429,3 +429,23 @@ def test_a_skill_reads_its_action_relative_to_the_hand_and_ends_where_the_classi
     lifted = {**cubes, "a": RigidTransform([0.5, 0.1, pick.z_transit])}
     assert effects_hold(pick, lifted, up, finger=0.019)
     assert not effects_hold(pick, lifted, up, finger=0.04)  # open: not held
+
+
+def test_the_release_is_drawn_for_a_skill_that_decides_its_gripper(tmp_path):
+    """``benchmarks/skills.py --release``: one held-out put-down of the shipped skill that
+    never sees the arm, its gripper's decision drawn; a skill that decides no gripper (the
+    joint-space one) is one line, exit 2."""
+
+    def bench(*args):
+        return subprocess.run([sys.executable, "benchmarks/skills.py", *args], cwd=ROOT,
+                              capture_output=True, text=True, timeout=600,
+                              env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
+
+    png = tmp_path / "release.png"
+    r = bench("--release", str(png))
+    assert r.returncode == 0, r.stderr
+    assert f"{png}: " in r.stdout and "opened at" in r.stdout, r.stdout
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    r = bench("--release", str(tmp_path / "no.png"), "--skills", str(SHIPPED))
+    assert r.returncode == 2 and "decides no gripper" in r.stdout, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "no.png").exists()
