@@ -8,7 +8,8 @@ action's cubes and target from the hand, and the gripper's width),
 the last ``n_obs_steps`` of them, and answers:
 
 - where the hand should be next, from the action's target (:func:`target_from_hand`:
-  above the cube for a pick or an unstack; for a place, where the held cube is to rest):
+  above the cube for a pick or an unstack; for a place, where the held cube is to rest,
+  and once the fingers have let go of it, over the place at the transit height):
   dx dy dz (m, world axes) and dyaw (rad). Added to the move onto the target, it is a
   move of the hand, turned into joints by the IK below
   (:class:`cake_drake.systems.skills.LearnedSkills`, ``ee_delta``), at whatever height
