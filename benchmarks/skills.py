@@ -153,10 +153,15 @@ def release(skills: str, seed: int, png: Path) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from cake_drake.errors import InputError
     from cake_drake.learning.policies.relative_skill import INPUT, WIDTH
 
-    env = gymnasium.make("cake_drake.gym:CakeDrake/Skill-v0", skill=skills, blocks=(3, 6),
-                         actions="put-down")  # fmt: skip
+    try:
+        env = gymnasium.make("cake_drake.gym:CakeDrake/Skill-v0", skill=skills,
+                             blocks=(3, 6), actions="put-down")  # fmt: skip
+    except InputError as e:
+        print(f"--release: {e}")
+        return 2
     skill = env.unwrapped.lead  # the lead has begun the put-down: it goes on answering
     if not hasattr(skill, "p_closed"):
         print(f"--release: {skills} decides no gripper; a skill that never sees the arm does")

@@ -449,3 +449,6 @@ def test_the_release_is_drawn_for_a_skill_that_decides_its_gripper(tmp_path):
     r = bench("--release", str(tmp_path / "no.png"), "--skills", str(SHIPPED))
     assert r.returncode == 2 and "decides no gripper" in r.stdout, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "no.png").exists()
+    r = bench("--release", str(tmp_path / "no.png"), "--skills", str(tmp_path / "none"))
+    assert r.returncode == 2 and "no such checkpoint folder" in r.stdout, r.stdout + r.stderr
+    assert "Traceback" not in r.stderr and not (tmp_path / "no.png").exists()
