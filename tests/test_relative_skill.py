@@ -185,6 +185,50 @@ def test_a_format_1_skill_is_acted_as_it_was_trained(tmp_path):
         rs.RelativeSkill(folder)
 
 
+def _pick_recording():
+    """One demonstrated pick-up, as the recording's columns: the hand crosses at the
+    transit height to over its cube (frames 0-9, 1 cm a frame), goes down (10-19, 2 cm a
+    frame), closes (20-24); each frame's command is the move to the next frame's hand."""
+    n = 25
+    hand = np.zeros((n, 3))
+    hand[:10, 0] = np.arange(-0.10, 0.0, 0.01)
+    hand[10:20, 2] = -0.02 * np.arange(10)
+    hand[20:] = hand[19]
+    skill = np.zeros((n, 13))
+    skill[:, 0] = 1.0  # pick-up
+    skill[:, 4:7] = np.array([0.0, 0.0, -0.2]) - hand  # the cube, 20 cm under the transit
+    skill[:, 8:11] = -hand  # the target: over the cube at the transit height
+    skill[:, 12] = -hand[:, 2]
+    action = np.zeros((n, 7))
+    action[:-1, :3] = hand[1:] - hand[:-1]
+    action[:, 6] = np.r_[np.ones(20), np.zeros(5)]  # open, then closed
+    return {
+        "skill": skill, "width": np.full(n, 0.08), "action": action,
+        "ground": np.tile([0, 0, -1, 0], (n, 1)), "episode": np.zeros(n, int),
+        "frame": np.arange(n), "fps": np.float64(10.0),
+    }  # fmt: skip
+
+
+def test_a_hand_still_crossing_learns_to_come_over_its_target_before_going_down():
+    """The heading half a second on, but no further than where the hand comes over its
+    target: a crossing frame is taught the point over the cube, not the descent after
+    it (a corner cut brings open fingers down beside a tower's top cube)."""
+    from cake_drake.learning.training import relative_skill as training
+
+    x, moves, closed = training.examples(_pick_recording(), 1, lookahead=5)
+    assert x.shape == (25, RELATIVE_SIZE) and moves.shape == (25, 4)
+    # Frame 7, 3 cm short: five frames on would be 4 cm down the descent (frame 12's
+    # command from the target: -0.06); it is taught the frame it comes over (10), whose
+    # command is the first 2 cm down.
+    np.testing.assert_allclose(moves[7, :3], [0.0, 0.0, -0.02], atol=1e-12)
+    # Frame 3: five frames on is still crossing (frame 8, a centimetre short): no cap.
+    np.testing.assert_allclose(moves[3, :3], [-0.01, 0.0, 0.0], atol=1e-12)
+    # Over it, the heading looks five frames on down the descent, to the gripper's change.
+    np.testing.assert_allclose(moves[11, :3], [0.0, 0.0, -0.14], atol=1e-12)
+    np.testing.assert_allclose(moves[17, :3], moves[19, :3], atol=1e-12)  # the closing
+    assert closed[:19].sum() == 0 and closed[20:].all()
+
+
 def test_training_varies_only_what_leaves_the_answer_where_it_was():
     """The trainer's augmentation moves a held cube in the fingers and a descending
     hand's transit height, and changes the label only as much as keeps the answer in the

@@ -37,6 +37,8 @@ LOOKAHEAD = 5
 GRIP_LOOKAHEAD = 1
 #: m from where a motion ends at which the hand counts as arrived there.
 ARRIVED = 0.003
+#: m across from its target at which a hand counts as over it (its crossing done).
+OVER = 0.003
 #: How far :func:`augment` moves a held cube in the fingers, at most (x, y, z in m; yaw
 #: in rad).
 GRASP_JITTER = np.array([0.004, 0.004, 0.012, 0.1])
@@ -140,7 +142,15 @@ def examples(
     phase_end = np.repeat(
         np.r_[phase_first[1:], len(frame)], np.diff(np.r_[phase_first, len(frame)])
     )
-    moves = headed[np.minimum(rows + lookahead, phase_end[rows] - 1)]
+    # Nor past the moment the hand comes over its target: a hand still crossing is headed
+    # for the point over its target, not already down the descent after it (the
+    # demonstrator crosses, then goes down; a heading half a second on cuts the corner,
+    # and open fingers come down beside a tower's top cube and pull the tower over).
+    over = np.flatnonzero(np.linalg.norm(onto[:, :2], axis=1) < OVER)
+    nxt = np.searchsorted(over, np.arange(len(frame)))
+    comes_over = np.where(nxt < len(over), over[np.minimum(nxt, len(over) - 1)], len(frame))
+    limit = np.where(comes_over > np.arange(len(frame)), comes_over, len(frame))
+    moves = headed[np.minimum.reduce([rows + lookahead, phase_end[rows] - 1, limit[rows]])]
     # The gripper's label a little ahead too (within the action): the hand at the cube
     # decides to close before its fingers show it, so the decision is learned from where
     # the hand is, not read off the fingers' width.
