@@ -48,8 +48,6 @@ GRIP_JITTER = 0.002
 #: most (m); it lowers it down to ``TRANSIT_CLEAR`` above the hand.
 TRANSIT_RAISE = 0.3
 TRANSIT_CLEAR = 0.01
-#: m from above its target at which a hand counts as descending onto it.
-ABOVE = 0.003
 #: The share of a batch's frames :func:`augment` may vary.
 AUGMENTED = 0.5
 
@@ -206,7 +204,7 @@ def augment(x: np.ndarray, moves: np.ndarray, rng) -> tuple[np.ndarray, np.ndarr
     grip = rng.uniform(-GRIP_JITTER, GRIP_JITTER, len(rows))
     # The final descent: over the target, below the transit height, before the gripper's
     # change (a pick's fingers open, a place's closed on its cube).
-    over = np.linalg.norm(rs.target_from_hand(now)[:, :2], axis=1) < ABOVE
+    over = np.linalg.norm(rs.target_from_hand(now)[:, :2], axis=1) < OVER
     descending = chosen & over & (now[:, 12] > TRANSIT_CLEAR) & (holding | reaching)
     down = np.flatnonzero(descending)
     lowest = np.min(x[down][:, 12::size], axis=1)  # the hand's highest in the history
