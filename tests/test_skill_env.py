@@ -83,3 +83,24 @@ def test_its_reward_terms_are_the_stack_env_s_names():
     env = gymnasium.make(ENV_ID, blocks=(2, 3))
     _, info = env.reset(seed=0)
     assert set(info["reward_terms"]) == {f for f in Reward.__dataclass_fields__}
+
+
+def test_the_fingers_move_at_their_speed_whatever_the_skill_decides():
+    """A gripper decision comes as a step (open, then closed at once); the fingers'
+    command moves at their speed (``FINGER_SPEED``, as the classical layer's close and
+    every demonstrator's): closing on a pick's empty air takes two control periods, and
+    the first ends with the fingers a cube's width apart. A step command slammed them shut
+    in one period, and the cube they closed on was kicked round in the grasp."""
+    from cake_drake.systems.skills import FINGER_SPEED
+
+    env = gymnasium.make(ENV_ID, blocks=(3, 4), actions="picks", rate_hz=10.0)
+    obs, info = env.reset(seed=0)
+    assert info["action"] in ("pick-up", "unstack") and obs[-1] > 0.079  # open, high up
+    stay_and_close = np.zeros(7)
+    widths = []
+    for _ in range(3):
+        obs, *_ = env.step(stay_and_close)
+        widths.append(float(obs[-1]))
+    a_period = 2 * FINGER_SPEED * 0.1  # m of width
+    assert widths[0] == pytest.approx(0.08 - a_period, abs=0.003), widths
+    assert widths[2] < 0.003, widths

@@ -91,6 +91,9 @@ LIFT_TOL = 0.02
 #: Control periods an action may take (15 s at 10 Hz) unless the scenario says.
 DEFAULT_BUDGET = 150
 GRIPPER_MAX = 0.08
+#: m/s each finger's command moves at most (the classical layer's close and open:
+#: ``Timing.gripper_time`` in :mod:`cake_drake.geometric.trajectory`, 4 cm in 0.2 s).
+FINGER_SPEED = 0.2
 #: The action spaces a skill may answer in, and how many numbers each answer has.
 SKILL_SPACES = {"joint_position": 8, "ee_delta": 7}
 
@@ -252,7 +255,12 @@ class LearnedSkills(LeafSystem):
         else:
             target, width = answer[:7], float(np.clip(answer[7], 0.0, GRIPPER_MAX))
         hold_target(self._groups, context, state, target, self.smooth_s)
-        fingers = np.array([width / 2, width / 2, 0.0, 0.0])
+        # The fingers' command moves at their speed, as the classical layer's and every
+        # demonstrator's does: a decision answered as a step would slam them shut.
+        was = context.get_discrete_state(self._groups["finger_state"]).get_value()[0]
+        most = FINGER_SPEED * self.period_s
+        half = float(np.clip(width / 2, was - most, was + most))
+        fingers = np.array([half, half, 0.0, 0.0])
         state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
         self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))
 
