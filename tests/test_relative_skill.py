@@ -43,6 +43,7 @@ def write_skill(folder: Path, hidden=(16, 16), n_obs: int = 2, last: int | None 
         "kind": rs.KIND, "format": rs.FORMAT, "input": rs.INPUT, "input_size": RELATIVE_SIZE,
         "n_obs_steps": n_obs, "hidden_dims": list(hidden), "moves": list(rs.MOVES),
         "gripper": gripper if gripper is not None else {"head": "closed_logit", "threshold": 0.7},
+        "move_scale_m": 0.005,
     }  # fmt: skip
     (folder / "skill.json").write_text(json.dumps(meta))
     rng = np.random.default_rng(seed)
@@ -152,7 +153,8 @@ def test_a_skill_answers_a_hand_move_and_a_decided_gripper(tmp_path):
     h = rs.gelu(h @ w["w1"] + w["b1"])
     out = h @ w["w2"] + w["b2"]
     moves, p = skill.forward(x[None])
-    np.testing.assert_allclose(moves[0], out[:4] * 0.01)
+    np.testing.assert_allclose(moves[0, :3], rs.expand(out[:3] * 0.01, 0.005))  # format 3
+    assert moves[0, 3] == pytest.approx(out[3] * 0.01)
     assert p[0] == pytest.approx(1 / (1 + np.exp(-out[4])))
 
 
@@ -180,9 +182,37 @@ def test_a_format_1_skill_is_acted_as_it_was_trained(tmp_path):
     meta = json.loads((folder / "skill.json").read_text())
     (folder / "skill.json").write_text(json.dumps({**meta, "format": 1}))
     assert not rs.RelativeSkill(folder).up_after_release
-    (folder / "skill.json").write_text(json.dumps({**meta, "format": 3}))
-    with pytest.raises(InputError, match=r"skill.json: format 3; this cake_drake reads 1 or 2"):
+    (folder / "skill.json").write_text(json.dumps({**meta, "format": 2}))
+    assert rs.RelativeSkill(folder).move_scale is None  # format 2: moves as they are
+    (folder / "skill.json").write_text(json.dumps({**meta, "format": 4}))
+    with pytest.raises(
+        InputError, match=r"skill.json: format 4; this cake_drake reads 1 or 2 or 3"
+    ):
         rs.RelativeSkill(folder)
+    (folder / "skill.json").write_text(json.dumps({**meta, "move_scale_m": "5 mm"}))
+    with pytest.raises(InputError, match=r"skill.json: move_scale_m '5 mm'; a format-3 skill"):
+        rs.RelativeSkill(folder)
+
+
+def test_a_format_3_skill_answers_its_moves_finely_near_the_target(tmp_path):
+    """Format 3 learns and answers the moves on a scale that is fine near the target and
+    coarse far from it; the network's answer comes back to metres exactly."""
+    moves = np.array([-0.3, -0.01, -0.001, 0.0, 0.0005, 0.001, 0.01, 0.3])
+    scaled = rs.compress(moves, 0.005)
+    np.testing.assert_allclose(rs.expand(scaled, 0.005), moves, atol=1e-15)
+    assert np.all(np.diff(scaled) > 0) and scaled[3] == 0.0
+    # a move at the target spans 21 times what it spans 10 cm out
+    at = lambda m: rs.compress(np.array([m + 1e-6]), 0.005) - rs.compress(np.array([m]), 0.005)  # noqa: E731
+    assert at(0.0)[0] / at(0.1)[0] == pytest.approx(21.0, rel=0.05)
+    skill = rs.RelativeSkill(write_skill(tmp_path / "s"))
+    assert skill.move_scale == 0.005
+    x = np.zeros((1, 2 * RELATIVE_SIZE))
+    skill.move_scale = None
+    raw, p = skill.forward(x)
+    skill.move_scale = 0.005
+    moved, q = skill.forward(x)
+    np.testing.assert_allclose(moved[:, :3], rs.expand(raw[:, :3], 0.005))
+    assert moved[0, 3] == raw[0, 3] and p[0] == q[0]  # the yaw and the gripper as they were
 
 
 def _pick_recording():
@@ -230,7 +260,7 @@ def test_a_hand_still_crossing_learns_to_come_over_its_target_before_going_down(
 
 
 def test_training_varies_only_what_leaves_the_answer_where_it_was():
-    """The trainer's augmentation moves a held cube in the fingers and a descending
+    """The trainer's augmentation moves the hand about a held cube and a descending
     hand's transit height, and changes the label only as much as keeps the answer in the
     world the same: the held cube set where it was set, the hand sent where it was sent."""
     from cake_drake.learning.training import relative_skill as training
@@ -255,13 +285,19 @@ def test_training_varies_only_what_leaves_the_answer_where_it_was():
     for k in (0, 1):  # about half of each varied; the others not at all
         assert 0.35 < changed[rows == k].mean() < 0.65
     assert not changed[rows >= 2].any() and np.array_equal(moves2[rows >= 2], moves[rows >= 2])
-    # The place: the held cube moved in the fingers by up to GRASP_JITTER; it is set where
-    # it was (hand's target + the cube in the hand), its label untouched.
+    # The place: the hand moved about the held cube by up to GRASP_JITTER, the cube where
+    # it was in the world: its rest read from the hand moved alike, the cube as far
+    # from its rest as it was (so its release is decided alike), and it is set where it
+    # was set, from its rest (the hand's move + the cube in the hand - the rest).
     p = rows == 0
-    assert np.abs(now2[p, 4:8] - now[p, 4:8]).max() <= training.GRASP_JITTER.max()
-    assert np.abs(now2[p, 6] - now[p, 6]).max() > 0.008
-    set_at = lambda v, m: rs.target_from_hand(v)[:, :3] + m[:, :3] + v[:, 4:7]  # noqa: E731
-    np.testing.assert_allclose(set_at(now2[p], moves2[p]), set_at(now[p], moves[p]), atol=1e-12)
+    shift = now2[p, 4:8] - now[p, 4:8]
+    assert np.abs(shift).max() <= training.GRASP_JITTER.max()
+    assert np.abs(shift[:, 2]).max() > 0.008
+    np.testing.assert_allclose(now2[p, 8:12] - now[p, 8:12], shift, atol=1e-12)
+    from_rest = lambda v, m: rs.target_from_hand(v)[:, :3] + m[:, :3] + v[:, 4:7] - v[:, 8:11]  # noqa: E731
+    np.testing.assert_allclose(
+        from_rest(now2[p], moves2[p]), from_rest(now[p], moves[p]), atol=1e-12
+    )
     np.testing.assert_array_equal(moves2[p], moves[p])
     # The descent: the transit height anywhere from TRANSIT_CLEAR above the hand up; the
     # pick's target rose with it and its move fell as much: the hand goes where it went.
@@ -291,6 +327,27 @@ def test_the_hand_keeps_to_its_target_while_the_fingers_move(tmp_path):
     assert [a[6] for a in answers] == [1.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     # Steps 1-4: the fingers close, the hand keeps step 0's heading; step 5: they are still.
     assert headed[:5] == [0.0] * 5 and headed[5] == pytest.approx(0.005)
+
+
+def test_a_hand_stopped_with_its_probability_between_the_thresholds_decides_the_nearer_side(
+    tmp_path,
+):
+    """The band between the thresholds holds the last decision while the hand moves; a
+    hand that stays where it is for ``STOPPED_STEPS`` decides by the nearer side, so it
+    does not hover over its place with the cube held until its budget runs out."""
+    skill = rs.RelativeSkill(write_skill(tmp_path / "s"))
+    v = np.zeros(RELATIVE_SIZE)
+    v[3], v[10], v[13] = 1.0, -0.002, 0.039  # a stack, the cube held 2 mm over its rest
+    probabilities = iter([0.9] + [0.45] * 30)
+    skill.forward = lambda x: (np.zeros((1, 4)), np.array([next(probabilities)]))
+    moving = [skill.act({rs.INPUT: v.copy()})[6]]
+    for k in range(4):  # the hand still coming down: the decision held, closed
+        v[10] += 0.001 * (k % 2 * 2 - 1)
+        moving.append(skill.act({rs.INPUT: v.copy()})[6])
+    assert moving == [0.0] * 5
+    stopped = [skill.act({rs.INPUT: v.copy()})[6] for _ in range(rs.STOPPED_STEPS + 1)]
+    assert stopped[: rs.STOPPED_STEPS - 1] == [0.0] * (rs.STOPPED_STEPS - 1)
+    assert stopped[-1] == 1.0  # stopped, 0.45 is nearer open: let go
 
 
 # --- folders checked before anything runs -------------------------------------------------

@@ -37,15 +37,31 @@ from cake_drake.policy.observations import RELATIVE_SIZE
 
 #: What ``skill.json`` says a folder is.
 KIND = "relative_skill"
-#: The format a training writes: 2, where a place whose fingers have let go of the cube
-#: answers from the point above the place at the transit height. Format 1 (the first
-#: trainings) answered it from the hand, and is read as it was trained.
-FORMAT = 2
-FORMATS = (1, 2)
+#: The format a training writes: 3, whose moves are answered on a scale that is fine
+#: near the target and coarse far from it (:func:`expand`, ``move_scale_m``). Format 2
+#: answered them on one scale; from format 2 on, a place whose fingers have let go of the
+#: cube answers from the point above the place at the transit height. Format 1 (the
+#: first trainings) answered it from the hand. Each is read as it was trained.
+FORMAT = 3
+FORMATS = (1, 2, 3)
 INPUT = "observation.relative"
 #: What the network answers, in this order, then the gripper's logit: the hand's next
 #: target from the action's target (m, world axes; rad about z).
 MOVES = ("dx", "dy", "dz", "dyaw")
+
+
+def compress(move: np.ndarray, scale: float) -> np.ndarray:
+    """A move of the hand (m) on the scale a format-3 network answers on,
+    ``sign * log(1 + |move| / scale)``: a millimetre at the target counts as much there
+    as 1 + |move| / scale millimetres further out (21 at 10 cm, with a 5 mm scale), so
+    an error the size of the network's spread costs millimetres at the target, not
+    centimetres. :func:`expand` is its inverse."""
+    return np.sign(move) * np.log1p(np.abs(move) / scale)
+
+
+def expand(answer: np.ndarray, scale: float) -> np.ndarray:
+    """The move (m) a format-3 network's ``answer`` stands for (see :func:`compress`)."""
+    return np.sign(answer) * scale * np.expm1(np.abs(answer))
 
 
 #: ``observation.relative``'s gripper width.
@@ -86,6 +102,13 @@ MAX_FILE_BYTES = 16 * 2**20
 FINGERS_STILL = 0.0005
 #: Steps the hand waits for its fingers at most (1 s at 10 Hz).
 MAX_WAIT = 10
+#: m the hand's target may move in a step and the hand count as stopped there; after
+#: ``STOPPED_STEPS`` such steps in a row (1 s at 10 Hz), the gripper's decision is the
+#: nearer side of one half (:func:`decide`'s ``last`` None): the band between the two
+#: thresholds keeps a moving hand's fingers from flickering, but a hand stopped with its
+#: probability in the band would otherwise hold over its place until its budget ran out.
+HAND_STILL = 0.0003
+STOPPED_STEPS = 10
 
 
 def gelu(x: np.ndarray) -> np.ndarray:
@@ -146,6 +169,10 @@ def _read_meta(folder: Path) -> dict:
         raise InputError(f"{path}: hidden_dims {hidden!r:.40}; a list of layer widths, 1 to 4096")
     if meta.get("moves") != list(MOVES):
         raise InputError(f"{path}: moves {meta.get('moves')!r:.60}; a skill answers {list(MOVES)}")
+    scale = meta.get("move_scale_m")
+    if meta["format"] >= 3 and not (isinstance(scale, int | float) and 1e-4 <= scale <= 1.0):
+        raise InputError(f"{path}: move_scale_m {scale!r:.24}; a format-3 skill answers its "
+                         "moves on a scale of 0.0001 to 1 m")  # fmt: skip
     gripper = meta.get("gripper")
     if not (isinstance(gripper, dict) and gripper.get("head") == "closed_logit"):
         raise InputError(
@@ -211,6 +238,8 @@ class RelativeSkill:
         self.n_obs = int(self.meta["n_obs_steps"])
         self.threshold = float(threshold or self.meta["gripper"].get("threshold", THRESHOLD))
         self.up_after_release = self.meta["format"] >= 2
+        #: m: the scale of a format-3 skill's moves (None: answered as they are).
+        self.move_scale = self.meta.get("move_scale_m") if self.meta["format"] >= 3 else None
         self.reset()
 
     def reset(self) -> None:
@@ -219,6 +248,8 @@ class RelativeSkill:
         self._width: float | None = None
         self._waited: int | None = None  # steps since the decision changed, while waiting
         self._last: np.ndarray | None = None  # the answer before it changed
+        self._onto: np.ndarray | None = None  # the move onto the target, a step before
+        self._stopped = 0  # steps in a row the hand has stayed where it was
         #: The gripper head's last probability that the gripper should be closed (None
         #: before the action's first answer): what the decision was made from.
         self.p_closed: float | None = None
@@ -231,7 +262,10 @@ class RelativeSkill:
             h = gelu(h @ w + b)
         w, b = self.layers[-1]
         out = h @ w + b
-        return self.move_mean + out[:, : len(MOVES)] * self.move_std, sigmoid(out[:, -1])
+        moves = self.move_mean + out[:, : len(MOVES)] * self.move_std
+        if self.move_scale:
+            moves[:, :3] = expand(moves[:, :3], self.move_scale)
+        return moves, sigmoid(out[:, -1])
 
     def act(self, observation) -> np.ndarray:
         now = np.asarray(observation[INPUT], np.float64).reshape(RELATIVE_SIZE)
@@ -240,7 +274,11 @@ class RelativeSkill:
         self._seen = [*self._seen[1:], now]
         moves, p_closed = self.forward(np.concatenate(self._seen)[None])
         self.p_closed = float(p_closed[0])
-        closed = decide(self.p_closed, self._closed, self.threshold)
+        onto = target_from_hand(now, self.up_after_release)
+        still = self._onto is not None and np.linalg.norm(onto[:3] - self._onto[:3]) < HAND_STILL
+        self._stopped, self._onto = (self._stopped + 1 if still else 0), onto
+        last = None if self._stopped >= STOPPED_STEPS else self._closed
+        closed = decide(self.p_closed, last, self.threshold)
         width = float(now[WIDTH])
         if self._closed is not None and closed != self._closed:
             self._waited = 0
@@ -255,7 +293,7 @@ class RelativeSkill:
         # While the fingers move on a new decision, the hand keeps to where it was going
         # before it (the cube it grasps, the place it lets go): no lift before the grip.
         # The hand's target, answered from the action's target, as a move from the hand.
-        dx, dy, dz, dyaw = self._last + target_from_hand(now, self.up_after_release)
+        dx, dy, dz, dyaw = self._last + onto
         return np.array([dx, dy, dz, 0.0, 0.0, dyaw, 0.0 if self._closed else 1.0])
 
 

@@ -39,7 +39,7 @@ GRIP_LOOKAHEAD = 1
 ARRIVED = 0.003
 #: m across from its target at which a hand counts as over it (its crossing done).
 OVER = 0.003
-#: How far :func:`augment` moves a held cube in the fingers, at most (x, y, z in m; yaw
+#: How far :func:`augment` moves the hand about a held cube, at most (x, y, z in m; yaw
 #: in rad).
 GRASP_JITTER = np.array([0.004, 0.004, 0.012, 0.1])
 #: How much :func:`augment` widens or narrows the fingers on a held cube, at most (m).
@@ -50,6 +50,11 @@ TRANSIT_RAISE = 0.3
 TRANSIT_CLEAR = 0.01
 #: The share of a batch's frames :func:`augment` may vary.
 AUGMENTED = 0.5
+#: m: the scale the moves are learned on (``compress`` in
+#: :mod:`cake_drake.learning.policies.relative_skill`): a network that answers the move
+#: itself, standardised over whole crossings (a spread of decimetres), answered a place's
+#: last millimetres a few millimetres off, and held the cube over its place.
+MOVE_SCALE = 0.02
 
 
 def read_frames(root: Path) -> dict[str, np.ndarray]:
@@ -172,15 +177,19 @@ def augment(x: np.ndarray, moves: np.ndarray, rng) -> tuple[np.ndarray, np.ndarr
     what does not matter is seen to vary (a share ``AUGMENTED`` of the frames, each
     observation of a frame alike). Copies; the inputs are untouched.
 
-    - **The grasp.** In a place whose fingers hold the cube, the cube is moved in the
-      fingers (``GRASP_JITTER``): the answer is where the held cube goes, from where it
-      is to rest (:func:`cake_drake.learning.policies.relative_skill.target_from_hand`),
-      the same wherever it sits, and the fingers' width on it is varied by up to
-      ``GRIP_JITTER``. Every demonstrated grasp is centred to a millimetre, and the
-      fingers close on every cube to a tenth of one: a cube held a centimetre low, or
-      fingers a millimetre narrower, would otherwise be a scene no frame showed (the
-      width, which tells a held cube from a let-go one, was read to a tenth of a
-      millimetre, and a hand stopped over its place on a millimetre's difference).
+    - **The grasp.** In a place whose fingers hold the cube, the hand is moved about the
+      cube (``GRASP_JITTER``): the cube stays where it is in the world, so everything the
+      frame reads from the hand (the cube, its rest, the transit height, their yaws)
+      moves alike, and both answers stay: where the held cube goes, from its rest
+      (:func:`cake_drake.learning.policies.relative_skill.target_from_hand`), and whether
+      to let go of it, which the demonstrator decided from the cube at its rest. The
+      fingers' width on it is varied by up to ``GRIP_JITTER``. Every demonstrated grasp
+      is centred to a millimetre, and the fingers close on every cube to a tenth of one:
+      a cube held a centimetre low, or fingers a millimetre narrower, would otherwise be
+      a scene no frame showed (the width, which tells a held cube from a let-go one, was
+      read to a tenth of a millimetre, and a hand stopped over its place on a
+      millimetre's difference). Moving the cube alone would move it from its rest, and
+      teach a release wherever the cube is: a cube held low let go of above its place.
     - **The transit height in a final descent.** Once the hand is over its target (a
       cube to grasp, or the held cube over its place) and going down to it, how high the
       towers elsewhere are does not change where it goes: the transit height
@@ -211,12 +220,21 @@ def augment(x: np.ndarray, moves: np.ndarray, rng) -> tuple[np.ndarray, np.ndarr
     rise = rng.uniform(TRANSIT_CLEAR - lowest, TRANSIT_RAISE)
     up = picking[down]
     for k in range(steps):
-        x[rows, k * size + 4 : k * size + 8] += shift
+        x[rows, k * size + 4 : k * size + 8] += shift  # the cube, from the hand
+        x[rows, k * size + 8 : k * size + 12] += shift  # its rest, and the rest's yaw
+        x[rows, k * size + 12] += shift[:, 2]  # the transit height
         x[rows, k * size + rs.WIDTH] += grip
         x[down, k * size + 12] += rise
         x[down[up], k * size + 10] += rise[up]
     moves[down[up], 2] -= rise[up]
     return x, moves
+
+
+def scaled(moves: np.ndarray) -> np.ndarray:
+    """The moves (N, 4) as the network learns them: x y z on ``MOVE_SCALE``, yaw as is."""
+    out = np.array(moves, np.float64)
+    out[:, :3] = rs.compress(out[:, :3], MOVE_SCALE)
+    return out
 
 
 def losses(moves_std, logit, target_std, closed):
@@ -258,6 +276,7 @@ def train_relative(
     rng = np.random.default_rng(seed)
     # The scales are those of the varied examples (a centimetre off is no outlier).
     seen_x, seen_moves = augment(x, moves, rng)
+    seen_moves = scaled(seen_moves)
     in_mean, in_std = seen_x.mean(0), np.maximum(seen_x.std(0), 1e-3)
     move_mean, move_std = seen_moves.mean(0), np.maximum(seen_moves.std(0), 1e-4)
     layers: list[nn.Module] = []
@@ -275,6 +294,7 @@ def train_relative(
 
     def standard(rows):
         bx, bm = augment(x[rows], moves[rows], rng)
+        bm = scaled(bm)
         return (torch.as_tensor((bx - in_mean) / in_std, dtype=torch.float32),
                 torch.as_tensor((bm - move_mean) / move_std, dtype=torch.float32))  # fmt: skip
 
@@ -304,6 +324,7 @@ def train_relative(
         "input_size": x.shape[1] // n_obs_steps, "n_obs_steps": n_obs_steps,
         "hidden_dims": list(hidden_dims), "moves": list(rs.MOVES),
         "gripper": {"head": "closed_logit", "threshold": rs.THRESHOLD},
+        "move_scale_m": MOVE_SCALE,
         "lookahead_frames": LOOKAHEAD,
         "grip_lookahead_frames": GRIP_LOOKAHEAD,
         "augmented": {"share": AUGMENTED, "grasp_jitter": GRASP_JITTER.tolist(),
