@@ -10,7 +10,8 @@ the last ``n_obs_steps`` of them, and answers:
 - where the hand should be next, from the action's target (:func:`target_from_hand`:
   above the cube for a pick or an unstack; for a place, where the held cube is to rest,
   and once the fingers have let go of it, over the place at the transit height):
-  dx dy dz (m, world axes) and dyaw (rad). Added to the move onto the target, it is a
+  dx dy dz (m, world axes; from format 3 on, answered on a scale fine near the target:
+  :func:`compress`) and dyaw (rad). Added to the move onto the target, it is a
   move of the hand, turned into joints by the IK below
   (:class:`cake_drake.systems.skills.LearnedSkills`, ``ee_delta``), at whatever height
   and place the action is. Answered from the target rather than from the hand, a grasp
@@ -18,8 +19,9 @@ the last ``n_obs_steps`` of them, and answers:
   "a little further";
 - the gripper as a decision: one logit, the probability that the gripper should be
   closed. Above ``threshold`` it closes, below ``1 - threshold`` it opens, between the two
-  it holds its last decision (:func:`decide`): a hand at rest whose answer wavers near
-  one half does not open and close in turn.
+  it holds its last decision (:func:`decide`): a moving hand whose answer wavers near
+  one half does not open and close in turn; a hand that has stopped takes the nearer
+  side (``STOPPED_STEPS``), so that it does not stay over its place with the cube held.
 
 Acting is NumPy alone (no torch at run time): the network is a few dense layers.
 """
@@ -53,7 +55,7 @@ MOVES = ("dx", "dy", "dz", "dyaw")
 def compress(move: np.ndarray, scale: float) -> np.ndarray:
     """A move of the hand (m) on the scale a format-3 network answers on,
     ``sign * log(1 + |move| / scale)``: a millimetre at the target counts as much there
-    as 1 + |move| / scale millimetres further out (21 at 10 cm, with a 5 mm scale), so
+    as 1 + |move| / scale millimetres further out (6 at 10 cm, on the trainer's 2 cm), so
     an error the size of the network's spread costs millimetres at the target, not
     centimetres. :func:`expand` is its inverse."""
     return np.sign(move) * np.log1p(np.abs(move) / scale)
