@@ -58,8 +58,9 @@ then ``evaluate`` the skills in place of each task's demonstrator (the planner's
 execution monitor, the skills as the geometric layer), with the classical geometric
 layer on the same episodes beside each row; ``--sizes`` adds generated problems of those
 sizes, which no demonstration had. ``--skill-tasks`` names the recording tasks (``skills``:
-joint targets; ``skills_hand``: moves of the hand), ``--shipped`` adds the shipped skills,
-as trained and with their action chunks ensembled (``motion.skill_ensemble``).
+joint targets; ``skills_hand``: moves of the hand), ``--joint-space`` adds the joint-space skills
+kept in ``models/policies/skills_joint_space``, as trained and with their action chunks
+ensembled (``motion.skill_ensemble``).
 Each row says how often the monitor's repeats and replans rescued an episode, how far the
 stacks were set off the cube below (median/95th percentile) and the mean simulated time.
 
@@ -418,11 +419,11 @@ def skills(args) -> None:
     from cake_drake.learning.evaluation import evaluate as evaluate_here
     from cake_drake.scenario import SKILL_POLICY, load_scenario
 
-    shipped = ROOT / "models" / "policies" / "skills"
+    kept = ROOT / "models" / "policies" / "skills_joint_space"
     # Each checkpoint as trained (its chunk's first actions open loop, then a new chunk),
-    # and the shipped one also with its chunks ensembled (motion.skill_ensemble).
-    checkpoints = ([("shipped", shipped, 0.0), ("shipped, ensembled", shipped, 0.01)]
-                   if args.shipped else [])  # fmt: skip
+    # and the kept joint-space one also with its chunks ensembled (motion.skill_ensemble).
+    checkpoints = ([("joint-space", kept, 0.0), ("joint-space, ensembled", kept, 0.01)]
+                   if args.joint_space else [])  # fmt: skip
     for task in args.skill_tasks:
         for demos in args.skills:
             run, figures = trained(task, "mlp", demos, args.work)
@@ -530,7 +531,11 @@ def main() -> None:
         help="--skills: the recording tasks trained (skills: joint targets; skills_hand: "
         "moves of the hand; skills+skills_tall:300: with 300 tall-tower ones)",
     )
-    p.add_argument("--shipped", action="store_true", help="--skills: models/policies/skills too")
+    p.add_argument(
+        "--joint-space",
+        action="store_true",
+        help="--skills: models/policies/skills_joint_space too",
+    )
     p.add_argument(
         "--pixels",
         type=int,
@@ -544,7 +549,7 @@ def main() -> None:
     args.work.mkdir(parents=True, exist_ok=True)
     print(machine())
     print(f"held-out seeds {args.eval_seed}..{args.eval_seed + args.episodes - 1}")
-    if args.skills or args.shipped:
+    if args.skills or args.joint_space:
         skills(args)
         return
     if args.pixels:

@@ -1,13 +1,14 @@
 """How a learned skill's 10 Hz answers reach computed torque: held as steps, or through the
 reference filter (``motion.skill_smooth_s``), on the same held-out problem_5 episodes.
 
-For each setting, the shipped skills (``models/policies/skills``) run under the planner
-and the execution monitor (``learned_tower5``: problem_5, towers placed at random per
-seed); per setting it prints the episodes that built the tower, the mean simulated time,
-how far the stacks landed off the cube below (median and 95th percentile), and how much
-the elbow's commanded torque jumps from one 10 ms sample to the next (median and 99th
-percentile of |delta tau|, N m): the chatter a staircase reference causes. ``--figure``
-draws the elbow's torque of the first episode under each setting, one above the other.
+For each setting, the joint-space skills (``models/policies/skills_joint_space``: the
+filter smooths joint targets) run under the planner and the execution monitor
+(``learned_tower5``'s problem_5, towers placed at random per seed); per setting it
+prints the episodes that built the tower, the mean simulated time, how far the stacks
+landed off the cube below (median and 95th percentile), and how much the elbow's
+commanded torque jumps from one 10 ms sample to the next (median and 99th percentile of
+|delta tau|, N m): the chatter a staircase reference causes. ``--figure`` draws the
+elbow's torque of the first episode under each setting, one above the other.
 
     python benchmarks/skill_reference.py --episodes 10 --smooth 0 0.15 \
         --figure docs/images/skill_reference.png
@@ -25,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 ELBOW = 3  # joint 4
+JOINT_SPACE = "package://cake_drake/policies/skills_joint_space"
 
 
 def episode(seed: int, smooth_s: float):
@@ -37,6 +39,7 @@ def episode(seed: int, smooth_s: float):
     spec = spec_from_scenario(load_scenario(LEARNING, "tower5"))
     scenario = spec.env().episode_scenario(seed)
     scenario.reference, scenario.motion = base.reference, base.motion
+    scenario.motion.skills = JOINT_SPACE
     scenario.motion.skill_smooth_s = smooth_s
     scenario.cameras = []
     scenario.outputs.render = False

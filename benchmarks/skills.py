@@ -1,7 +1,7 @@
 """The learned middle at every height and load: learned skills under the planner, row by row,
 with the classical geometric layer on the same episodes beside each (the skills: the ones
-that never see the arm, ``models/policies/skills_relative``, unless ``--skills`` names
-another folder, such as the joint-space ``package://cake_drake/policies/skills``).
+that never see the arm, ``models/policies/skills``, unless ``--skills`` names
+another folder, such as the joint-space ``package://cake_drake/policies/skills_joint_space``).
 
 Rows (whole runs: planning, the execution monitor with ``re_place``, the simulation, the
 verdict measured from the world), seeds 100000 and up, none a demonstration had:
@@ -20,7 +20,8 @@ and the failures by their first words; ``--json`` keeps the rows.
 
     python benchmarks/skills.py                          # 50 episodes a row (hours)
     python benchmarks/skills.py --episodes 10 --rows problem_5 tall8   # a quick look
-    python benchmarks/skills.py --skills package://cake_drake/policies/skills --no-classical
+    python benchmarks/skills.py --skills package://cake_drake/policies/skills_joint_space \
+        --no-classical   # the joint-space skills, the comparison
     python benchmarks/skills.py --release docs/images/skill_release.png   # the release, drawn
 
 ``--release PNG`` draws, instead of the table, the gripper's decision over one held-out
@@ -45,7 +46,7 @@ from machine import machine
 
 ROOT = Path(__file__).resolve().parent.parent
 SUITE = ROOT / "models" / "scenarios" / "learning.yaml"
-SKILLS = "package://cake_drake/policies/skills_relative"
+SKILLS = "package://cake_drake/policies/skills"
 FIRST_SEED = 100000
 
 

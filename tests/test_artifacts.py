@@ -20,8 +20,12 @@ MODELS = ROOT / "models"
     ("folder", "kind", "words"),
     [
         ("policies/stack2", "policy", "imitation, cake_mlp"),
-        ("policies/skills", "skill", "reads the arm's joints, answers in joint_position"),
-        ("policies/skills_relative", "relative_skill", "reads the action from the hand"),
+        (
+            "policies/skills_joint_space",
+            "skill",
+            "reads the arm's joints, answers in joint_position",
+        ),
+        ("policies/skills", "relative_skill", "reads the action from the hand"),
         ("policies/stack2_pixels_rl", "rl", "imitation + RL residual, PPO"),
         ("planners/blocks", "planner", "relational network, width 64"),
         ("residuals/cubes_0.5kg", "residual", "residual fitted on 5 runs"),
@@ -34,7 +38,7 @@ def test_each_shipped_learned_part_is_of_its_kind_and_described_by_it(folder, ki
 
 def test_a_training_folder_is_its_last_checkpoints_kind(tmp_path):
     last = tmp_path / "run" / "checkpoints" / "last" / "pretrained_model"
-    shutil.copytree(MODELS / "policies" / "skills", last)
+    shutil.copytree(MODELS / "policies" / "skills_joint_space", last)
     assert artifacts.detect(tmp_path / "run").name == "skill"
 
 

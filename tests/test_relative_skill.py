@@ -2,7 +2,7 @@
 gripper is a decision (its loss and threshold by hand); its folder is checked before
 anything runs, and a skill of the other kind is refused where this one is asked for.
 
-The shipped joint-space skill (models/policies/skills) is the other kind; the
+The joint-space skill (models/policies/skills_joint_space) is the other kind; the
 relative folders here are written by the trainer's own format (skill.json,
 weights.npz) with small random weights.
 """
@@ -32,7 +32,7 @@ from cake_drake.symbolic import GroundAction
 from cake_drake.world.scene import CUBE_SIZE, SLOTS
 
 ROOT = Path(__file__).resolve().parent.parent
-JOINT_SKILL = ROOT / "models" / "policies" / "skills"
+JOINT_SKILL = ROOT / "models" / "policies" / "skills_joint_space"
 
 
 def write_skill(folder: Path, hidden=(16, 16), n_obs: int = 2, last: int | None = None,
@@ -184,14 +184,44 @@ def test_a_format_1_skill_is_acted_as_it_was_trained(tmp_path):
     assert not rs.RelativeSkill(folder).up_after_release
     (folder / "skill.json").write_text(json.dumps({**meta, "format": 2}))
     assert rs.RelativeSkill(folder).move_scale is None  # format 2: moves as they are
-    (folder / "skill.json").write_text(json.dumps({**meta, "format": 4}))
+    (folder / "skill.json").write_text(json.dumps({**meta, "format": 3}))
+    assert not rs.RelativeSkill(folder).transit_floor  # format 3: the transit height as read
+    assert rs.RelativeSkill(write_skill(tmp_path / "t")).transit_floor
+    (folder / "skill.json").write_text(json.dumps({**meta, "format": 5}))
     with pytest.raises(
-        InputError, match=r"skill.json: format 4; this cake_drake reads 1 or 2 or 3"
+        InputError, match=r"skill.json: format 5; this cake_drake reads 1 or 2 or 3 or 4"
     ):
         rs.RelativeSkill(folder)
     (folder / "skill.json").write_text(json.dumps({**meta, "move_scale_m": "5 mm"}))
-    with pytest.raises(InputError, match=r"skill.json: move_scale_m '5 mm'; a format-3 skill"):
+    with pytest.raises(InputError, match=r"skill.json: move_scale_m '5 mm'; a skill of "
+                                         r"format 3 or later"):  # fmt: skip
         rs.RelativeSkill(folder)
+
+
+def test_a_hand_above_its_transit_height_reads_as_a_hand_at_it(tmp_path):
+    """Format 4: a put-down begun above its transit height (the unstack before it took
+    the tallest tower's top cube, and the transit height dropped by a cube) reads, to the
+    network, as a put-down at its transit height; below it, as it is."""
+    v = np.zeros(RELATIVE_SIZE)
+    v[2], v[4:7], v[8:11], v[12], v[rs.WIDTH] = 1.0, [0, 0, -0.02], [0.2, 0.1, -0.3], -0.04, 0.04
+    read = rs.floor_transit(v)
+    assert read[12] == 0.0 and np.array_equal(np.delete(read, 12), np.delete(v, 12))
+    assert v[12] == -0.04  # a copy
+    two = rs.floor_transit(np.concatenate([v, np.r_[v[:12], 0.05, v[13:]]]))
+    assert two[12] == 0.0 and two[RELATIVE_SIZE + 12] == 0.05  # each observation alike
+    # The skill reads it so (its network's input is what it reads)...
+    skill = rs.RelativeSkill(write_skill(tmp_path / "s"))
+    above, at = skill.forward(np.r_[v, v][None]), skill.forward(np.r_[read, read][None])
+    first = skill.act({rs.INPUT: v})
+    np.testing.assert_array_equal(skill._seen[-1], read)
+    assert not np.array_equal(above[0], at[0])  # the floor is no no-op for a network
+    np.testing.assert_allclose(first[[0, 1, 2, 5]], at[0][0] + rs.target_from_hand(v))
+    # A format-3 skill reads the transit height as it comes.
+    meta = json.loads((tmp_path / "s" / "skill.json").read_text())
+    (tmp_path / "s" / "skill.json").write_text(json.dumps({**meta, "format": 3}))
+    old = rs.RelativeSkill(tmp_path / "s")
+    old.act({rs.INPUT: v})
+    np.testing.assert_array_equal(old._seen[-1], v)
 
 
 def test_a_format_3_skill_answers_its_moves_finely_near_the_target(tmp_path):

@@ -37,15 +37,14 @@ def test_skills_beside_a_whole_task_policy_are_refused_in_one_line(tmp_path):
     path.write_text(
         "both:\n"
         "  reference: !Policy {checkpoint: package://cake_drake/policies/stack2}\n"
-        "  motion: {skills: package://cake_drake/policies/skills}\n"
+        "  motion: {skills: package://cake_drake/policies/skills_joint_space}\n"
     )
     r = _cli("cake_drake.run", "--scenario", str(path), "--name", "both",
              "--out", str(tmp_path / "out"))  # fmt: skip
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1
-    assert "motion.skills (package://cake_drake/policies/skills) with reference: !Policy" in (
-        r.stderr
-    )
+    said = "motion.skills (package://cake_drake/policies/skills_joint_space) with reference"
+    assert said + ": !Policy" in r.stderr
     assert not (tmp_path / "out").exists()
 
 

@@ -19,7 +19,7 @@ import pytest
 from cake_drake.learning.policies import skill_rl
 
 ROOT = Path(__file__).resolve().parent.parent
-SKILL = ROOT / "models" / "policies" / "skills_relative"
+SKILL = ROOT / "models" / "policies" / "skills"
 
 TINY = """\
 tiny:
@@ -68,7 +68,7 @@ def test_a_short_ppo_run_writes_its_folder_with_held_out_checks(trained):
     )
     info = json.loads((out / skill_rl.FILE).read_text())
     assert info["kind"] == "skill_residual" and info["steps"] == 128
-    assert info["base"]["path"] == "package://cake_drake/policies/skills_relative"
+    assert info["base"]["path"] == "package://cake_drake/policies/skills"
     assert info["base"]["sha256"] == skill_rl.digest(SKILL)
     # checks at 0 (the base alone), 64 and 128, each on the same two held-out places
     assert [c["steps"] for c in info["checks"]] == [0, 64, 128]
@@ -130,7 +130,7 @@ def test_a_residual_for_another_base_is_refused_before_simulating(trained, tmp_p
 
 
 def test_a_skill_residual_on_a_skill_that_reads_the_arm_is_refused(tmp_path):
-    joint = ROOT / "models" / "policies" / "skills"
+    joint = ROOT / "models" / "policies" / "skills_joint_space"
     (tmp_path / "tiny.yaml").write_text(
         TINY.format(skill=SKILL).replace(f'base: "{SKILL}"', f'base: "{joint}"')
     )

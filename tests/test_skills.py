@@ -21,8 +21,13 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 SHIPPED = ROOT / "models" / "policies" / "skills"
+#: The skills that read the arm's joints, kept beside the shipped ones as the comparison.
+JOINT_SPACE = ROOT / "models" / "policies" / "skills_joint_space"
 #: What a run's layers say of the shipped skills (joint-space, a LeRobot checkpoint).
-DESCRIBED = "imitation, cake_mlp, reads the arm's joints, answers in joint_position"
+DESCRIBED = (
+    "imitation, reads the action from the hand (never the arm), answers hand moves "
+    "with IK below and a gripper decision"
+)
 
 pytestmark = pytest.mark.slow
 
@@ -285,7 +290,7 @@ def test_skill_settings_that_cannot_work_are_refused_before_simulating(tmp_path)
     ):  # fmt: skip
         spec = scenario_file(tmp_path, f"""
 bad:
-  motion: {{skills: "package://cake_drake/policies/skills", {motion}}}
+  motion: {{skills: "package://cake_drake/policies/skills_joint_space", {motion}}}
 """)  # fmt: skip
         out = tmp_path / "out"
         r = cli("cake_drake.run", "--scenario", str(spec), "--name", "bad", "--out", str(out))
@@ -446,7 +451,7 @@ def test_the_release_is_drawn_for_a_skill_that_decides_its_gripper(tmp_path):
     assert r.returncode == 0, r.stderr
     assert f"{png}: " in r.stdout and "opened at" in r.stdout, r.stdout
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    r = bench("--release", str(tmp_path / "no.png"), "--skills", str(SHIPPED))
+    r = bench("--release", str(tmp_path / "no.png"), "--skills", str(JOINT_SPACE))
     assert r.returncode == 2 and "decides no gripper" in r.stdout, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "no.png").exists()
     r = bench("--release", str(tmp_path / "no.png"), "--skills", str(tmp_path / "none"))

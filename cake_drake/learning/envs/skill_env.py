@@ -68,7 +68,7 @@ from cake_drake.world.scene import CUBE_SIZE, set_world_parameters
 
 #: The skill a skill environment leads with unless told: the shipped one that never sees
 #: the arm.
-DEFAULT_SKILL = MODELS_DIR / "policies" / "skills_relative"
+DEFAULT_SKILL = MODELS_DIR / "policies" / "skills"
 #: The kinds of ground action an episode may be (the exercise's names).
 ACTION_KINDS = ("pick-up", "unstack", "put-down", "stack")
 PLACES = ("put-down", "stack")

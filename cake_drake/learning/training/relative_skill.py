@@ -149,9 +149,8 @@ def examples(
     # for the point over its target, not already down the descent after it (the
     # demonstrator crosses, then goes down; a heading half a second on cuts the corner,
     # and open fingers come down beside a tower's top cube and pull the tower over).
-    over = np.flatnonzero(np.linalg.norm(onto[:, :2], axis=1) < OVER)
-    nxt = np.searchsorted(over, np.arange(len(frame)))
-    comes_over = np.where(nxt < len(over), over[np.minimum(nxt, len(over) - 1)], len(frame))
+    over = np.r_[np.flatnonzero(np.linalg.norm(onto[:, :2], axis=1) < OVER), len(frame)]
+    comes_over = over[np.searchsorted(over, np.arange(len(frame)))]  # len(frame): never
     limit = np.where(comes_over > np.arange(len(frame)), comes_over, len(frame))
     moves = headed[np.minimum.reduce([rows + lookahead, phase_end[rows] - 1, limit[rows]])]
     # The gripper's label a little ahead too (within the action): the hand at the cube
