@@ -185,8 +185,8 @@ def test_a_format_1_skill_is_acted_as_it_was_trained(tmp_path):
     (folder / "skill.json").write_text(json.dumps({**meta, "format": 2}))
     assert rs.RelativeSkill(folder).move_scale is None  # format 2: moves as they are
     (folder / "skill.json").write_text(json.dumps({**meta, "format": 3}))
-    assert not rs.RelativeSkill(folder).transit_floor  # format 3: the transit height as read
-    assert rs.RelativeSkill(write_skill(tmp_path / "t")).transit_floor
+    assert not rs.RelativeSkill(folder).format4  # format 3: the transit height as read
+    assert rs.RelativeSkill(write_skill(tmp_path / "t")).format4
     (folder / "skill.json").write_text(json.dumps({**meta, "format": 5}))
     with pytest.raises(
         InputError, match=r"skill.json: format 5; this cake_drake reads 1 or 2 or 3 or 4"
@@ -203,7 +203,7 @@ def test_a_hand_above_its_transit_height_reads_as_a_hand_at_it(tmp_path):
     the tallest tower's top cube, and the transit height dropped by a cube) reads, to the
     network, as a put-down at its transit height; below it, as it is."""
     v = np.zeros(RELATIVE_SIZE)
-    v[2], v[4:7], v[8:11], v[12], v[rs.WIDTH] = 1.0, [0, 0, -0.02], [0.2, 0.1, -0.3], -0.04, 0.04
+    v[2], v[4:7], v[8:11], v[12], v[rs.WIDTH] = 1.0, [0, 0, -0.02], [0.1, 0.05, -0.3], -0.04, 0.04
     read = rs.floor_transit(v)
     assert read[12] == 0.0 and np.array_equal(np.delete(read, 12), np.delete(v, 12))
     assert v[12] == -0.04  # a copy
@@ -490,3 +490,36 @@ def test_a_learning_tasks_episodes_carry_its_cubes_mass():
     assert spec_from_scenario(load_scenario(suite, "skills_relative")).cube_mass_range_kg == (
         0.05, 0.5)  # fmt: skip
     assert spec_from_scenario(load_scenario(suite, "tower5")).cube_mass_range_kg == ()
+
+
+def test_a_far_target_reads_as_a_near_one_in_its_direction(tmp_path):
+    """Format 4: a target further across than NEAR reads as if the hand were NEAR from it
+    on the line to it: two hands 40 cm and 70 cm from the same cube read the same
+    numbers; what the fingers hold moves with the hand, a cube still to be picked does
+    not; the skill's answer is then a heading near its target, and its move is taken
+    from where the hand really is."""
+    pick = np.zeros(RELATIVE_SIZE)
+    pick[0], pick[rs.WIDTH] = 1.0, 0.08  # a pick, fingers open
+    reads = []
+    for far in (0.4, 0.7):
+        v = pick.copy()
+        v[4:7], v[8:11], v[12] = [far * 0.6, far * 0.8, -0.09], [far * 0.6, far * 0.8, 0.0], 0.0
+        reads.append(rs.near_target(v))
+    np.testing.assert_allclose(reads[0], reads[1], atol=1e-12)
+    np.testing.assert_allclose(reads[0][8:11], [rs.NEAR * 0.6, rs.NEAR * 0.8, 0.0])
+    np.testing.assert_allclose(reads[0][4:7], [rs.NEAR * 0.6, rs.NEAR * 0.8, -0.09])
+    near = pick.copy()
+    near[4:6] = near[8:10] = [0.03, 0.04]
+    np.testing.assert_array_equal(rs.near_target(near), near)  # within NEAR: as it is
+    # A place: the held cube, 12 mm below the grasp frame, stays where it is in the hand.
+    place = np.zeros(RELATIVE_SIZE)
+    place[2], place[rs.WIDTH] = 1.0, 0.04
+    place[4:7], place[8:11] = [0.0, 0.0, -0.012], [0.0, -0.5, -0.2]
+    read = rs.near_target(place)
+    np.testing.assert_allclose(read[4:7], place[4:7])
+    np.testing.assert_allclose(read[8:11], [0.0, -rs.NEAR, -0.2])
+    # In a run: the network answers from what it reads; the move from the real hand.
+    skill = rs.RelativeSkill(write_skill(tmp_path / "s"))
+    moves, _ = skill.forward(np.r_[read, read][None])
+    answer = skill.act({rs.INPUT: place})
+    np.testing.assert_allclose(answer[[0, 1, 2, 5]], moves[0] + rs.target_from_hand(place))

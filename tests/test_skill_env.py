@@ -104,3 +104,40 @@ def test_the_fingers_move_at_their_speed_whatever_the_skill_decides():
     a_period = 2 * FINGER_SPEED * 0.1  # m of width
     assert widths[0] == pytest.approx(0.08 - a_period, abs=0.003), widths
     assert widths[2] < 0.003, widths
+
+
+def test_a_skill_blind_to_quarter_turns_keeps_the_wrist_mid_range():
+    """A skill that reads yaws modulo a quarter turn answers a turn nearest the hand's
+    yaw; action after action, the wrist wound up to its joint limit. The hand instead
+    turns towards the quarter turn of the answer nearest the comfortable yaw over the
+    action's target (the classical layer's), chosen at the action's first period and
+    kept, at most the step's limit a period."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from cake_drake.learning.policies.relative_skill import RelativeSkill
+    from cake_drake.systems.skills import LearnedSkills, SkillProgress
+
+    assert RelativeSkill.free_quarter_turns
+    system = SimpleNamespace(_params=None)
+    turn = lambda prog, hand, dyaw: LearnedSkills._wrist_turn(system, prog, cubes, hand, dyaw, 0.25)  # noqa: E731
+    hand_at = lambda yaw, p: RigidTransform(RotationMatrix.MakeZRotation(yaw), p)  # noqa: E731
+    pick = SkillProgress(context=SimpleNamespace(target=None, cube="a"))
+    cubes = {"a": RigidTransform([0.5, 0.0, 0.02])}  # straight ahead: comfortable yaw 0
+    # Its answer turns the hand 0.05 rad on, to 2.05; the same grasp is 2.05 - 90 deg.
+    step, wrist = turn(pick, hand_at(2.0, [0.45, 0.0, 0.2]), 0.05)
+    assert step == pytest.approx(-0.25) and wrist == pytest.approx(2.05 - np.pi / 2)
+    # Kept through the action: from the half-way yaw, still towards the chosen one.
+    kept = SkillProgress(context=pick.context, wrist=wrist)
+    half_way = wrist + np.pi / 4 + 0.05
+    step, again = turn(kept, hand_at(half_way, [0.45, 0.0, 0.2]), 0.0)
+    assert step == pytest.approx(-0.25) and again == wrist
+    step, _ = turn(kept, hand_at(wrist + 0.1, [0.45, 0.0, 0.2]), -0.1)
+    assert step == pytest.approx(-0.1)  # there: its own answer
+    # A place: the comfortable yaw over where the cube goes (to the left: 90 deg).
+    place = SkillProgress(context=SimpleNamespace(target=np.array([0.0, 0.5, 0.02]), cube="a"))
+    step, wrist = turn(place, hand_at(np.pi / 2 + 0.1, [0.0, 0.45, 0.2]), 0.0)
+    assert step == pytest.approx(0.0) and wrist == pytest.approx(np.pi / 2 + 0.1)
+    step, _ = turn(place, hand_at(0.1, [0.0, 0.45, 0.2]), 0.0)
+    assert step == pytest.approx(0.25)  # the same grasp turned a quarter, a step at a time

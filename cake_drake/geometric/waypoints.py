@@ -105,7 +105,7 @@ def grasp_yaw(X_WB: RigidTransform, preferred: float) -> float:
     which the fingers (the grasp frame's y axis) close along the cube's axis nearest to
     horizontal, whose two faces stand vertical (a half turn of it)."""
     if tilt(X_WB) <= TILT_TOL:
-        return _nearest_turn(face_yaw(X_WB), preferred)
+        return nearest_turn(face_yaw(X_WB), preferred)
     R = X_WB.rotation().matrix()
     u = R[:, int(np.argmin(np.abs(R[2, :])))]
     # gripper_down(yaw)'s y axis is (sin yaw, -cos yaw, 0): along u at yaw(u) + 90 deg.
@@ -126,7 +126,15 @@ def yaw_of(X: RigidTransform) -> float:
     return float(RollPitchYaw(X.rotation()).yaw_angle())
 
 
-def _nearest_turn(yaw: float, preferred: float) -> float:
+def comfortable_yaw(p, params: WaypointParams) -> float:
+    """The gripper's yaw over the point ``p`` that keeps the arm's wrist mid-range: the
+    fingers across the line from the arm's base, turned by ``params.yaw_turns`` quarter
+    turns. Grasps and places take the quarter turn of their cube nearest to it (the
+    classical layer's, and a learned skill's: :class:`cake_drake.systems.skills.LearnedSkills`)."""
+    return math.atan2(p[1], p[0]) + params.yaw_turns * math.pi / 2
+
+
+def nearest_turn(yaw: float, preferred: float) -> float:
     """``yaw + k * 90 deg`` closest to ``preferred``."""
     k = round((preferred - yaw) / (math.pi / 2))
     return yaw + k * math.pi / 2
@@ -170,7 +178,7 @@ def waypoints_for(
     if name in PICK_ACTIONS:
         X_WB = poses[block]
         p = X_WB.translation()
-        preferred = math.atan2(p[1], p[0]) + params.yaw_turns * math.pi / 2
+        preferred = comfortable_yaw(p, params)
         R = gripper_down(grasp_yaw(X_WB, preferred))
         z_transit = transit_height(poses, held=None, params=params)
         above = max(z_transit, p[2] + params.approach)
@@ -198,9 +206,9 @@ def waypoints_for(
             X_GB = RigidTransform(RotationMatrix.MakeXRotation(math.pi), [0.0, 0.0, 0.0])
         # Cube yaw that is a quarter turn of the target's, with the gripper yaw nearest
         # to the comfortable one.
-        preferred = math.atan2(target[1], target[0]) + params.yaw_turns * math.pi / 2
+        preferred = comfortable_yaw(target, params)
         grip_minus_cube = yaw_of(world.X_WG) - face_yaw(poses[block]) if in_hand else 0.0
-        cube_yaw = _nearest_turn(target_yaw, preferred - grip_minus_cube)
+        cube_yaw = nearest_turn(target_yaw, preferred - grip_minus_cube)
         X_WB_target = RigidTransform(RotationMatrix.MakeZRotation(cube_yaw), target)
         X_place = X_WB_target @ X_GB.inverse()
         # Keep the gripper pointing straight down even if the cube tilted in the hand.

@@ -66,6 +66,12 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
 
 from cake_drake.errors import ExecutionError
+from cake_drake.geometric.waypoints import (
+    WaypointParams,
+    comfortable_yaw,
+    nearest_turn,
+    yaw_of,
+)
 from cake_drake.plugins import DURING, guarded
 from cake_drake.policy import spaces
 from cake_drake.policy.observations import (
@@ -134,6 +140,9 @@ class SkillProgress:
     succeeded: int = 0
     timed_out: int = 0
     total_steps: int = 0
+    #: rad: the yaw, modulo a quarter turn, the hand keeps to through the action under way
+    #: (a skill blind to quarter turns; chosen at its first period: :meth:`_wrist_turn`).
+    wrist: float | None = None
 
     def __deepcopy__(self, memo):
         return self
@@ -167,6 +176,10 @@ class LearnedSkills(LeafSystem):
         if self.space == "ee_delta" and ik is None:
             raise ValueError("an ee_delta skill needs an ik (DlsIk) to turn moves into joints")
         self.ik, self.counts = ik, spaces.Counts()
+        #: The skill reads every yaw modulo a quarter turn (a cube's faces are alike):
+        #: the hand may then take whichever quarter turn of its answer keeps the wrist
+        #: mid-range (:meth:`_wrist_turn`).
+        self._free_turns = bool(getattr(skill, "free_quarter_turns", False))
         self.budget, self.meaning, self._params = budget, meaning, waypoints
         self._clearance = getattr(waypoints, "transit_clearance", 0.05)
         #: Wall-clock budget (s) of one answer (a skill may carry its own, as a policy does).
@@ -249,6 +262,9 @@ class LearnedSkills(LeafSystem):
             low, high = spaces.bounds("ee_delta", {}, None, None)
             move = np.clip(answer, low, high)
             self.counts.clipped += int(not np.array_equal(move, answer))
+            if self._free_turns:
+                move[5], wrist = self._wrist_turn(prog, cubes, X_WG, move[5], high[5])
+                prog = replace(prog, wrist=wrist)
             last = reference_target(self._groups, context)
             q = spaces.ee_target(move[:6], X_WG, self.ik, last, self.counts, down=True)
             target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
@@ -263,6 +279,27 @@ class LearnedSkills(LeafSystem):
         fingers = np.array([half, half, 0.0, 0.0])
         state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
         self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))
+
+    def _wrist_turn(self, prog: SkillProgress, cubes, X_WG, dyaw: float, most: float):
+        """The turn of the hand this period (at most ``most`` rad) for a skill that reads
+        yaws modulo a quarter turn, and the yaw it keeps to: at the action's first period,
+        the quarter turn of where the answer ``dyaw`` points that is nearest the
+        comfortable yaw over the action's target (the classical layer's choice,
+        :func:`cake_drake.geometric.waypoints.comfortable_yaw`); after it, the quarter turn
+        of the answer nearest that one. The skill's own answer turns the hand nearest to
+        where it is, so, action after action, the wrist wound up to its joint limit (joint
+        7 at 2.9 rad on a generated eight-cube problem) and the IK below could not follow
+        the next move. Chosen once an action: chosen afresh each period, an answer near
+        the half-way yaw between two quarter turns turned the hand to and fro."""
+        hand = yaw_of(X_WG)
+        wrist = prog.wrist
+        if wrist is None:
+            action = prog.context
+            where = action.target if action.target is not None else cubes[action.cube].translation()
+            wrist = comfortable_yaw(where, self._params or WaypointParams())
+            wrist = nearest_turn(hand + dyaw, wrist)
+        goal = nearest_turn(hand + dyaw, wrist)
+        return float(np.clip(goal - hand, -most, most)), wrist
 
     def _observe(self, context, action: SkillContext, cubes, X_WG) -> dict:
         arm = self._arm.Eval(context)
@@ -299,7 +336,7 @@ class LearnedSkills(LeafSystem):
             return replace(prog, error=f"action {cmd.index + 1} {cmd.action}: {e}")
         guarded(f"skill {self.label!r}", self.skill.reset, exit_code=DURING,
                 budget_s=self._budget_s)  # fmt: skip
-        return replace(prog, working=cmd.index, action=cmd.action, context=ctx, steps=0)
+        return replace(prog, working=cmd.index, action=cmd.action, context=ctx, steps=0, wrist=None)
 
     def _end(self, prog: SkillProgress, held: bool) -> SkillProgress:
         """The action is over: counted done for the action source to judge."""

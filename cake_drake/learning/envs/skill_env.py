@@ -88,6 +88,8 @@ class HeldSkill:
     def __init__(self, lead) -> None:
         self.lead = lead
         self.action_space = getattr(lead, "action_space", "joint_position")
+        # The actions given are executed as the lead's would be (the wrist's quarter turn).
+        self.free_quarter_turns = getattr(lead, "free_quarter_turns", False)
         self.action = None  # set by step(); None: the lead answers
         self.label = "the action given to CakeDrake/Skill-v0's step()"
 

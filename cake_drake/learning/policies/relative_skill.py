@@ -40,7 +40,8 @@ from cake_drake.policy.observations import RELATIVE_SIZE
 #: What ``skill.json`` says a folder is.
 KIND = "relative_skill"
 #: The format a training writes: 4, which at run time reads a transit height below the
-#: hand as the hand's own (:func:`floor_transit`). From format 3 on, the moves are answered on a
+#: hand as the hand's own (:func:`floor_transit`) and a far target as a near one
+#: (:func:`near_target`). From format 3 on, the moves are answered on a
 #: scale that is fine near the target and coarse far from it (:func:`expand`,
 #: ``move_scale_m``); format 2 answered them on one scale. From format 2 on, a place
 #: whose fingers have let go of the cube answers from the point above the place at the
@@ -116,6 +117,33 @@ def target_from_hand(relative: np.ndarray, up_after_release: bool = True) -> np.
     xyz = np.where(picking, relative[..., 8:11], place_xyz)
     yaw = np.where(picking[..., 0], relative[..., 7], place_yaw)
     return np.concatenate([xyz, yaw[..., None]], axis=-1)
+
+
+#: m: a target further across from the hand than this reads, to a format-4 network, as
+#: one this far, in its direction (:func:`near_target`).
+NEAR = 0.15
+
+
+def near_target(relative: np.ndarray, up_after_release: bool = True) -> np.ndarray:
+    """``observation.relative`` (14) as a format-4 network reads it in a run: a target
+    further across than ``NEAR`` read as if the hand were ``NEAR`` from it, on the line
+    to it, at the same height (what is in the fingers moves with the hand; the rest, the
+    target and a cube still to be picked, does not). Answered from the target, a move
+    across the table is the network's largest answer, the difference of two numbers of
+    decimetres, and on the scale it answers on, an error there grows as the move does:
+    from 73 cm, an unstack's answer pointed away from its cube, and the hand, further
+    each step, went on away. Read near, the answer is a heading near the target, where
+    the network is fine; the hand goes straight to it at the skill's step limit, across
+    at the height it is at, as the classical layer's transit. A copy."""
+    out = np.array(relative, np.float64)
+    across = target_from_hand(out, up_after_release)[:2]
+    far = float(np.hypot(*across))
+    if far > NEAR:
+        closer = across * (1.0 - NEAR / far)
+        out[8:10] -= closer
+        if out[WIDTH] > LET_GO:  # the fingers hold no cube: it stays where it is
+            out[4:6] -= closer
+    return out
 
 
 #: The gripper's decision: closed when its probability passes this, open below 1 - this.
@@ -251,6 +279,10 @@ class RelativeSkill:
     move, no roll or pitch, and the gripper: 1 open, 0 closed)."""
 
     action_space = "ee_delta"
+    #: It reads every yaw modulo a quarter turn, so the hand may take any quarter turn of
+    #: its answer (:class:`cake_drake.systems.skills.LearnedSkills` keeps the wrist
+    #: mid-range so).
+    free_quarter_turns = True
 
     def __init__(self, path: str | Path, threshold: float | None = None) -> None:
         self.folder = Path(path)
@@ -264,7 +296,9 @@ class RelativeSkill:
         self.up_after_release = self.meta["format"] >= 2
         #: m: the scale of a format-3 skill's moves (None: answered as they are).
         self.move_scale = self.meta.get("move_scale_m") if self.meta["format"] >= 3 else None
-        self.transit_floor = self.meta["format"] >= 4
+        #: Format 4 reads a transit height below the hand, and a far target, as
+        #: :func:`floor_transit` and :func:`near_target` say.
+        self.format4 = self.meta["format"] >= 4
         self.reset()
 
     def reset(self) -> None:
@@ -294,7 +328,7 @@ class RelativeSkill:
 
     def act(self, observation) -> np.ndarray:
         now = np.asarray(observation[INPUT], np.float64).reshape(RELATIVE_SIZE)
-        read = floor_transit(now) if self.transit_floor else now
+        read = near_target(floor_transit(now), self.up_after_release) if self.format4 else now
         if not self._seen:
             self._seen = [read] * self.n_obs
         self._seen = [*self._seen[1:], read]

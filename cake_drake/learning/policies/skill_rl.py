@@ -112,6 +112,7 @@ class ResidualSkill:
     ``reset()`` at each new action, ``act(observation)`` -> ee_delta's 7 numbers."""
 
     action_space = "ee_delta"
+    free_quarter_turns = True  # as its base: it reads the base's input and answer alone
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
