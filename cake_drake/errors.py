@@ -73,8 +73,14 @@ def quiet_interrupts() -> None:
     """
     import signal
 
+    _a_command[:] = [True]
     for s in (signal.SIGINT, signal.SIGTERM):
         signal.signal(s, _interrupted_at_start)
+
+
+#: Whether this process is a command (:func:`quiet_interrupts` ran): only a command, which
+#: ends once :func:`run_cli` returns, ignores interrupts after the one that stopped it.
+_a_command: list[bool] = []
 
 
 #: Whether :func:`run_cli` has started a command's main (after it, an interrupt that
@@ -86,6 +92,7 @@ def _interrupted_at_start(signum, frame) -> None:
     """Nothing has been written before a command's main starts: say so, end at once."""
     import signal
 
+    _ignore_interrupts()
     if not _main_started:
         how = " by SIGTERM" if signum == signal.SIGTERM else ""
         try:
@@ -93,6 +100,20 @@ def _interrupted_at_start(signum, frame) -> None:
         except OSError:  # no standard error: the exit code says it
             pass
     os._exit(EXIT_INTERRUPTED)
+
+
+def _ignore_interrupts() -> None:
+    """A command that has decided to end as interrupted (130) ignores any interrupt after
+    that one: the interpreter's teardown puts the default handlers back, and an interrupt
+    arriving then (a second Ctrl-C, or one delivered late) killed the process by the
+    signal (-2) after it had printed its line."""
+    import signal
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(s, signal.SIG_IGN)
+        except ValueError:  # not the main thread
+            pass
 
 
 #: The signal that stopped the run, once one has: an interrupt raised inside a Drake
@@ -158,6 +179,8 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
+        if _signalled and _a_command:  # the command ends now: as interrupted, 130
+            _ignore_interrupts()
 
 
 def _reopen_closed_streams() -> None:
