@@ -141,3 +141,55 @@ def test_a_skill_blind_to_quarter_turns_keeps_the_wrist_mid_range():
     assert step == pytest.approx(0.0) and wrist == pytest.approx(np.pi / 2 + 0.1)
     step, _ = turn(place, hand_at(0.1, [0.0, 0.45, 0.2]), 0.0)
     assert step == pytest.approx(0.25)  # the same grasp turned a quarter, a step at a time
+
+
+def test_a_far_destination_is_read_on_the_way_around_the_arms_base():
+    """Towers on opposite sides of the table: the straight line between them passes 7 cm
+    from the arm's base, where no top-down hand reaches (the elbow folded to its limit
+    on a generated ten-cube problem). A skill that never sees the arm reads a destination
+    further across than ``AROUND`` as the point that far on the way around the base;
+    walked step by step, the hand keeps to the towers' arc and arrives."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.geometric.waypoints import around_base
+    from cake_drake.policy.observations import SKILL_SIZE
+    from cake_drake.systems.skills import AROUND, LearnedSkills
+    from cake_drake.world.scene import SLOTS
+
+    right, left = SLOTS[-2], SLOTS[-1]  # the outermost slots, either side
+    assert np.hypot(*right) == pytest.approx(0.55) and right[1] * left[1] < 0
+    (x0, y0), (x1, y1) = right, left
+    chord = abs(x0 * y1 - x1 * y0) / np.hypot(x1 - x0, y1 - y0)
+    assert chord < 0.1  # the straight line's nearest point to the base
+    hand, steps = np.array(right), 0
+    while not np.allclose(hand, left):
+        ahead = around_base(hand, left, AROUND)
+        assert np.hypot(*(ahead - hand)) == pytest.approx(AROUND, abs=0.01) or (ahead == left).all()
+        assert np.hypot(*ahead) > 0.54  # on the arc, never across the base
+        hand, steps = ahead, steps + 1
+        assert steps < 20
+    assert steps == int(np.ceil(0.55 * 2 * np.arctan2(abs(left[1]), left[0]) / AROUND))  # 11
+    np.testing.assert_array_equal(around_base([0.5, 0.0], [0.5, 0.1], AROUND), [0.5, 0.1])
+
+    # What the skill reads: a pick's cube and target move by the same step; a place's
+    # held cube stays in the hand; a near destination reads as it is, the same array.
+    X_WG = RigidTransform([right[0], right[1], 0.3])
+    far = np.zeros(SKILL_SIZE, np.float32)
+    far[4:6] = far[8:10] = np.subtract(left, right)
+    far[6], far[10] = -0.28, 0.0
+    pick = SimpleNamespace(target=None)
+    read = LearnedSkills._around(None, pick, far, X_WG)
+    ahead = around_base(right, left, AROUND)
+    np.testing.assert_allclose(read[4:6], ahead - right, atol=1e-6)
+    np.testing.assert_allclose(read[8:10], ahead - right, atol=1e-6)
+    np.testing.assert_array_equal(read[[6, 10]], far[[6, 10]])
+    place = far.copy()
+    place[4:7] = [0.0, 0.0, -0.012]
+    read = LearnedSkills._around(None, SimpleNamespace(target=np.zeros(3)), place, X_WG)
+    np.testing.assert_array_equal(read[4:7], place[4:7])
+    np.testing.assert_allclose(read[8:10], ahead - right, atol=1e-6)
+    near = far.copy()
+    near[4:6] = near[8:10] = [0.05, 0.05]
+    assert LearnedSkills._around(None, pick, near, X_WG) is near

@@ -134,6 +134,26 @@ def comfortable_yaw(p, params: WaypointParams) -> float:
     return math.atan2(p[1], p[0]) + params.yaw_turns * math.pi / 2
 
 
+def around_base(hand, destination, step: float) -> np.ndarray:
+    """The point ``step`` (m) from ``hand`` on the way to ``destination`` (x y, world)
+    around the arm's base: the bearing from the base and the distance from it change in
+    proportion, as the classical layer's transit swings the arm about its first joint.
+    The straight line between two towers on opposite sides of the table passes within a
+    few centimetres of the base, where no top-down hand reaches; this way keeps to the
+    arc the towers stand on. ``destination`` itself when it is no further than ``step``,
+    or when either point is within 10 cm of the base (no bearing to keep)."""
+    hand = np.asarray(hand, float)[:2]
+    destination = np.asarray(destination, float)[:2]
+    r0, r1 = float(np.hypot(*hand)), float(np.hypot(*destination))
+    if np.hypot(*(destination - hand)) <= step or min(r0, r1) < 0.1:
+        return destination
+    a0 = math.atan2(hand[1], hand[0])
+    turn = (math.atan2(destination[1], destination[0]) - a0 + math.pi) % (2 * math.pi) - math.pi
+    s = np.linspace(0.0, 1.0, 257)[1:, None]
+    way = (r0 + s * (r1 - r0)) * np.hstack([np.cos(a0 + s * turn), np.sin(a0 + s * turn)])
+    return way[int(np.argmax(np.hypot(*(way - hand).T) >= step))]
+
+
 def nearest_turn(yaw: float, preferred: float) -> float:
     """``yaw + k * 90 deg`` closest to ``preferred``."""
     k = round((preferred - yaw) / (math.pi / 2))

@@ -23,7 +23,9 @@ seconds for its action, from the joints and the action's own numbers (``observat
 :func:`cake_drake.policy.observations.skill_vector`, its targets fixed when the action
 starts as the classical layer fixes its waypoints), or, for a skill that never sees the
 arm, from those numbers and the gripper's width alone
-(``observation.relative``: :func:`cake_drake.policy.observations.relative_vector`).
+(``observation.relative``: :func:`cake_drake.policy.observations.relative_vector`), a
+destination further across than ``AROUND`` read on the way around the arm's base, as the
+classical layer's transit swings about the first joint (:meth:`LearnedSkills._around`).
 The skill is any object with ``reset()`` (a new action: no history) and
 ``act(observation)``; a checkpoint's adapter is made through the plug-in door, so
 nothing here imports the learning code. Its ``action_space`` (an attribute, default
@@ -68,6 +70,7 @@ from pydrake.systems.framework import LeafSystem
 from cake_drake.errors import ExecutionError
 from cake_drake.geometric.waypoints import (
     WaypointParams,
+    around_base,
     comfortable_yaw,
     nearest_turn,
     yaw_of,
@@ -102,6 +105,11 @@ GRIPPER_MAX = 0.08
 FINGER_SPEED = 0.2
 #: The action spaces a skill may answer in, and how many numbers each answer has.
 SKILL_SPACES = {"joint_position": 8, "ee_delta": 7}
+
+
+#: m: a skill that never sees the arm reads a destination further across as one this far,
+#: on the way around the arm's base (:meth:`LearnedSkills._around`).
+AROUND = 0.15
 
 
 def effects_hold(
@@ -310,8 +318,28 @@ class LearnedSkills(LeafSystem):
             "observation.state": np.r_[arm[:7], width].astype(np.float32),
             "observation.skill": skill,
             # What a skill that never sees the arm reads: no joint, no absolute height.
-            "observation.relative": relative_vector(skill, width),
+            "observation.relative": relative_vector(self._around(action, skill, X_WG), width),
         }
+
+    def _around(self, action: SkillContext, skill: np.ndarray, X_WG) -> np.ndarray:
+        """``observation.skill`` as a skill that never sees the arm reads it: a destination
+        further across than ``AROUND`` read as the point ``AROUND`` from the hand on the
+        way around the arm's base (:func:`cake_drake.geometric.waypoints.around_base`):
+        the target, and a cube still to be picked, moved by the same step; a held cube
+        stays in the hand. Read as they are, towers on opposite sides of the table led the
+        hand straight across, 22 cm from the base, and the arm folded to its elbow's
+        limit (a generated ten-cube problem)."""
+        hand = X_WG.translation()[:2]
+        picking = action.target is None  # the hand goes to the cube; a place's, to its target
+        destination = hand + (skill[4:6] if picking else skill[8:10])
+        shift = around_base(hand, destination, AROUND) - destination
+        if not shift.any():
+            return skill
+        out = skill.copy()
+        out[8:10] += shift
+        if picking:
+            out[4:6] += shift
+        return out
 
     def observe(self, context) -> dict | None:
         """What the skill reads now about the action under way (None when idle): the
