@@ -203,7 +203,7 @@ def test_a_hand_above_its_transit_height_reads_as_a_hand_at_it(tmp_path):
     the tallest tower's top cube, and the transit height dropped by a cube) reads, to the
     network, as a put-down at its transit height; below it, as it is."""
     v = np.zeros(RELATIVE_SIZE)
-    v[2], v[4:7], v[8:11], v[12], v[rs.WIDTH] = 1.0, [0, 0, -0.02], [0.1, 0.05, -0.3], -0.04, 0.04
+    v[2], v[4:7], v[8:11], v[12], v[rs.WIDTH] = 1.0, [0, 0, -0.02], [0.1, 0.05, -0.18], -0.04, 0.04
     read = rs.floor_transit(v)
     assert read[12] == 0.0 and np.array_equal(np.delete(read, 12), np.delete(v, 12))
     assert v[12] == -0.04  # a copy
@@ -523,3 +523,27 @@ def test_a_far_target_reads_as_a_near_one_in_its_direction(tmp_path):
     moves, _ = skill.forward(np.r_[read, read][None])
     answer = skill.act({rs.INPUT: place})
     np.testing.assert_allclose(answer[[0, 1, 2, 5]], moves[0] + rs.target_from_hand(place))
+
+
+def test_a_place_far_below_reads_as_one_deep_below():
+    """Format 4: a held cube's place further below it than DEEP reads as DEEP below (a
+    put-down 32 cm below the top of a ten-cube tower was answered with a move up); the
+    held cube stays in the hand, a place within DEEP and a pick's cube far below read as
+    they are, and so does a place once the fingers have let go."""
+    place = np.zeros(RELATIVE_SIZE)
+    place[2], place[rs.WIDTH] = 1.0, 0.04  # a put-down, the cube in the fingers
+    place[4:7], place[8:11] = [0.0, 0.0, -0.012], [0.03, 0.0, -0.332]
+    read = rs.near_target(place)
+    np.testing.assert_allclose(read[4:7], place[4:7])
+    np.testing.assert_allclose(read[8:11], [0.03, 0.0, -0.012 - rs.DEEP])
+    np.testing.assert_allclose(rs.target_from_hand(read)[2], -rs.DEEP)
+    within = place.copy()
+    within[10] = -0.15
+    np.testing.assert_array_equal(rs.near_target(within), within)
+    let_go = place.copy()
+    let_go[rs.WIDTH] = 0.08
+    np.testing.assert_array_equal(rs.near_target(let_go)[8:11], let_go[8:11])
+    pick = np.zeros(RELATIVE_SIZE)
+    pick[0], pick[rs.WIDTH] = 1.0, 0.08
+    pick[4:7], pick[8:11] = [0.02, 0.0, -0.4], [0.02, 0.0, 0.0]
+    np.testing.assert_array_equal(rs.near_target(pick), pick)

@@ -122,6 +122,9 @@ def target_from_hand(relative: np.ndarray, up_after_release: bool = True) -> np.
 #: m: a target further across from the hand than this reads, to a format-4 network, as
 #: one this far, in its direction (:func:`near_target`).
 NEAR = 0.15
+#: m: a held cube's place further below it than this reads, to a format-4 network, as
+#: one this far below (:func:`near_target`).
+DEEP = 0.2
 
 
 def near_target(relative: np.ndarray, up_after_release: bool = True) -> np.ndarray:
@@ -134,15 +137,21 @@ def near_target(relative: np.ndarray, up_after_release: bool = True) -> np.ndarr
     from 73 cm, an unstack's answer pointed away from its cube, and the hand, further
     each step, went on away. Read near, the answer is a heading near the target, where
     the network is fine; the hand goes straight to it at the skill's step limit, across
-    at the height it is at, as the classical layer's transit. A copy."""
+    at the height it is at, as the classical layer's transit. Likewise a held cube's
+    place further below it than ``DEEP`` reads as ``DEEP`` below: from the top of a
+    ten-cube tower, a put-down 32 cm below, further down than the demonstrations went,
+    was answered with a move up, and the hand rose out of reach. A copy."""
     out = np.array(relative, np.float64)
-    across = target_from_hand(out, up_after_release)[:2]
-    far = float(np.hypot(*across))
+    to = target_from_hand(out, up_after_release)
+    far = float(np.hypot(*to[:2]))
     if far > NEAR:
-        closer = across * (1.0 - NEAR / far)
+        closer = to[:2] * (1.0 - NEAR / far)
         out[8:10] -= closer
         if out[WIDTH] > LET_GO:  # the fingers hold no cube: it stays where it is
             out[4:6] -= closer
+    holding_its_cube = out[2] + out[3] > 0.5 and out[WIDTH] <= LET_GO  # a place, not let go
+    if holding_its_cube and -to[2] > DEEP:
+        out[10] += -to[2] - DEEP
     return out
 
 
