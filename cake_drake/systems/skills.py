@@ -115,6 +115,10 @@ AROUND = 0.15
 #: next move is taken from where it was last sent, at most ``LEAD`` on (``_short``).
 STILL = 0.001
 LEAD = 0.02
+#: m: a hand further across than this from where it goes down to (a pick's cube, or where
+#: a place puts its cube) keeps above it by the classical pre-grasp height
+#: (``WaypointParams.approach``): it goes down only once over it (:meth:`_over`).
+ALIGNED = 0.01
 
 
 def effects_hold(
@@ -282,6 +286,7 @@ class LearnedSkills(LeafSystem):
                 prog = replace(prog, wrist=wrist)
             last = reference_target(self._groups, context)
             base = self._short(prog, X_WG, last)
+            move[2] = self._over(prog.context, cubes, X_WG, base, move[2])
             q = spaces.ee_target(move[:6], base, self.ik, last, self.counts, down=True)
             prog = replace(prog, hand=tuple(X_WG.translation()))
             target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
@@ -312,6 +317,25 @@ class LearnedSkills(LeafSystem):
         if far > LEAD:
             short *= LEAD / far
         return RigidTransform(X_WG.rotation(), X_WG.translation() + short)
+
+    def _over(self, action: SkillContext, cubes, X_WG, base: RigidTransform, dz: float) -> float:
+        """The move ``dz`` (m) from ``base`` (:meth:`_short`) a hand measured at ``X_WG`` may
+        take this period: while it is more than ``ALIGNED`` across from where it goes down
+        to (the cube a pick takes; for a place, where the hand is when its cube rests on
+        its target), not below that point by the classical pre-grasp height
+        (``approach``); a hand already lower goes no lower. The classical layer goes down
+        only over the cube, from its pre-grasp pose; a skill that cut the corner went down
+        while still 4 cm across, its leading finger came down on the top cube of the tower
+        it was to unstack and knocked it off (problem_5), and a held cube came down on the
+        edge of its tower and tilted it."""
+        hand, z = X_WG.translation(), base.translation()[2]
+        cube = cubes[action.cube].translation()
+        to = cube if action.target is None else action.target + (hand - cube)
+        if np.hypot(*(to[:2] - hand[:2])) <= ALIGNED:
+            return dz
+        approach = (self._params or WaypointParams()).approach
+        lowest = min(z, to[2] + approach)
+        return max(dz, lowest - z)
 
     def _wrist_turn(self, prog: SkillProgress, cubes, X_WG, dyaw: float, most: float):
         """The turn of the hand this period (at most ``most`` rad) for a skill that reads
