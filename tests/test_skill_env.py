@@ -228,3 +228,50 @@ def test_a_hand_stopped_short_of_where_it_was_sent_takes_its_next_move_from_ther
         LearnedSkills._short(system, prog, far, last).translation(),
         far.translation() + [0.0, LEAD, 0.0],
     )
+
+
+def test_a_hand_goes_down_only_once_over_where_it_goes_down_to():
+    """An unstack's hand came down while still 4 cm across from its cube; the leading
+    finger landed on the cube's top and knocked it off its tower (problem_5). While more
+    than ``ALIGNED`` across from where it goes down to, a hand goes no lower than the
+    classical pre-grasp height above it (``approach``), and a hand already lower goes no
+    lower; over it, or going up, the skill's move is taken as it is."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.geometric.waypoints import WaypointParams
+    from cake_drake.systems.skills import ALIGNED, LearnedSkills
+
+    system = SimpleNamespace(_params=None)
+    approach = WaypointParams().approach
+    cube = np.array([0.565, -0.097, 0.06])  # the top of a two-cube tower
+    cubes = {"b": RigidTransform(cube), "a": RigidTransform([0.47, -0.29, 0.02])}
+    unstack = SimpleNamespace(cube="b", target=None)
+
+    def down(action, hand, dz, base=None):
+        X_WG = RigidTransform(hand)
+        return LearnedSkills._over(system, action, cubes, X_WG, base or X_WG, dz)
+
+    high = cube + [0.0, -0.042, 0.08]  # 4.2 cm across, 8 cm above
+    assert down(unstack, high, -0.05) == pytest.approx(approach - 0.08)  # to 6 cm above
+    assert down(unstack, cube + [0.0, -0.042, 0.041], -0.033) == 0.0  # lower already
+    assert down(unstack, high, 0.02) == 0.02  # going up
+    over = cube + [ALIGNED * 0.7, -ALIGNED * 0.7, 0.041]
+    assert down(unstack, over, -0.033) == -0.033
+    # From where it was last sent (a stopped hand's base), 2 cm above where it is.
+    sent = RigidTransform(high + [0.0, 0.0, 0.02])
+    assert down(unstack, high, -0.05, sent) == pytest.approx(approach - 0.1)
+
+    # A place: where the hand goes down to is the target, less the cube in the hand.
+    target = np.array([0.47, -0.29, 0.06])  # onto "a"
+    stack = SimpleNamespace(cube="b", target=target)
+    off = np.array([0.003, -0.002, 0.001])  # the hand, from the cube in its fingers
+
+    def holding(cube_at):
+        cubes["b"] = RigidTransform(cube_at)
+        return cube_at + off
+
+    assert down(stack, holding(target + [0.2, 0.1, 0.2]), -0.05) == -0.05  # 20 cm above
+    assert down(stack, holding(target + [0.03, 0.0, 0.07]), -0.03) == pytest.approx(approach - 0.07)
+    assert down(stack, holding(target + [0.005, 0.0, 0.07]), -0.03) == -0.03  # over it
