@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -256,6 +257,10 @@ def die(problem, time_limit):
 def test_a_raising_and_a_dying_run_are_rows_and_the_sweep_finishes(tmp_path, monkeypatch):
     (tmp_path / "sweep_plugins.py").write_text(PLUGINS)
     monkeypatch.syspath_prepend(str(tmp_path))  # spawned workers inherit sys.path
+    scratch = tmp_path / "tmp"  # the temporary folder of this process and its workers
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    monkeypatch.setattr(tempfile, "tempdir", None)  # read TMPDIR again
     base = Scenario()
     base.task.generate = load_scenario_generate(3, 2)
     base.outputs.render = False
@@ -282,6 +287,8 @@ def test_a_raising_and_a_dying_run_are_rows_and_the_sweep_finishes(tmp_path, mon
     assert die["status"] == "crashed" and "worker process died" in die["error"]
     assert ok["status"] == "done" and ok["success"], ok["message"]
     assert result.count("done") == 1
+    # The dead worker could not remove its scratch folder; the sweep removed it.
+    assert list(scratch.iterdir()) == []
     # Even a failed run keeps its scenario, to be re-run alone.
     assert (tmp_path / "out" / explode["folder"] / "scenario.yaml").is_file()
 

@@ -13,6 +13,7 @@ import json
 import os
 import shutil
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -182,20 +183,24 @@ def run_sweep(
     bar = SweepProgress(len(jobs), len(rows), enabled=progress)
     skipped = len(rows)
     interrupted = False
-    events = engine.events(todo)
-    try:
-        for event in events:
-            kind, job = event[0], event[1]
-            if kind == "done":
-                rows[job["id"]] = _keep(out, job, event[2])
-                bar.event(kind, job, rows[job["id"]])
-            else:
-                bar.event(kind, job)
-    except KeyboardInterrupt:
-        interrupted = True
-        events.close()
-    finally:
-        bar.close()
+    # The workers' scratch folders live in one the sweep owns and removes when it ends: a
+    # worker that dies (a crash, a plug-in that ends its process, a kill) cannot remove
+    # its own. A worker on another machine, where this path is not, uses its own.
+    with tempfile.TemporaryDirectory(prefix="cake-drake-sweep-", ignore_cleanup_errors=True) as tmp:
+        events = engine.events([{**job, "scratch": tmp} for job in todo])
+        try:
+            for event in events:
+                kind, job = event[0], event[1]
+                if kind == "done":
+                    rows[job["id"]] = _keep(out, job, event[2])
+                    bar.event(kind, job, rows[job["id"]])
+                else:
+                    bar.event(kind, job)
+        except KeyboardInterrupt:
+            interrupted = True
+            events.close()
+        finally:
+            bar.close()
     ordered = [rows[job["id"]] for job in jobs if job["id"] in rows]
     result = SweepResult(out, ordered, len(jobs), interrupted, skipped)
     result.written = write_table(ordered, out, columns=list(jobs[0]["params"]) if jobs else [])

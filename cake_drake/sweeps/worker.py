@@ -64,7 +64,8 @@ def crashed_row(job: dict, why: str) -> dict:
 
 
 def execute(job: dict) -> dict:
-    """Run one job: ``{"id", "scenario" (YAML text), "collect" (list)}`` ->
+    """Run one job: ``{"id", "scenario" (YAML text), "collect" (list), "scratch" (a folder
+    for its files while it runs; optional)}`` ->
     ``{"row": dict, "files": {name: bytes}}``. Never raises for a failing run."""
     from pydrake.common.yaml import yaml_load_typed
 
@@ -77,7 +78,9 @@ def execute(job: dict) -> dict:
     files: dict[str, bytes] = {}
     t0 = time.perf_counter()
     scenario = None
-    with tempfile.TemporaryDirectory(prefix="cake-drake-run-") as tmp:
+    scratch = job.get("scratch")  # the sweep's own scratch folder, where it can be seen
+    scratch = scratch if scratch and os.path.isdir(scratch) else None
+    with tempfile.TemporaryDirectory(prefix="cake-drake-run-", dir=scratch) as tmp:
         folder = Path(tmp) / "out"
         try:
             scenario = yaml_load_typed(schema=Scenario, data=job["scenario"])
