@@ -1,7 +1,7 @@
 """The Blocksworld suite end to end: n = 3..12 blocks, every seed, one table row each.
 
     python benchmarks/suite.py [--sizes 3 12] [--seeds 3] [--mode torque|position]
-                               [--time-limit S] [--jobs 1] [--json FILE]
+                               [--time-limit S] [--jobs 1] [--json FILE] [--skills FOLDER]
 
 The problems are :func:`cake_drake.symbolic.blocksworld.suite_problems`: per size, seed
 0 is random towers to random towers in the exercise's naming with a complete goal, seed
@@ -14,6 +14,11 @@ touch the next, and ``wall s`` is what a user waits for (interpreter start and i
 included). Rows print as problems finish; then the success rate, overall and per size.
 ``--jobs 2`` runs two at a time (only on an otherwise idle machine: the wall times then
 compete for the cores).
+
+``--skills FOLDER`` runs the same problems with learned skills as the geometric layer
+(``motion.skills``, e.g. ``package://cake_drake/policies/skills``) under the same
+planner, the monitor setting a stacked cube down again when it stands off the one below
+(``re_place``, as the shipped ``learned_tower5``).
 
 Columns: blocks, seed, naming, planner (the one that answered), plan length, planning
 s, simulated s, wall s (whole process), success, largest xy offset of a stacked cube
@@ -39,10 +44,10 @@ COLUMNS = (
 )  # fmt: skip
 
 
-def run_one(name: str, mode: str, time_limit: float | None) -> dict:
+def run_one(name: str, mode: str, time_limit: float | None, skills: str = "") -> dict:
     """Run one suite problem in this process and return its row (the worker's job)."""
     from cake_drake.pipeline import run
-    from cake_drake.scenario import Scenario, controller_for_mode
+    from cake_drake.scenario import Planned, Scenario, controller_for_mode
     from cake_drake.symbolic.blocksworld import suite_problems
 
     problems = {p[0]: p for p in suite_problems(range(1, 64), range(0, 64))}
@@ -54,6 +59,9 @@ def run_one(name: str, mode: str, time_limit: float | None) -> dict:
         s.task.domain = str(naming.domain_file)
         s.task.problem = str(problem)
         s.task.time_limit = time_limit
+        if skills:
+            s.motion.skills = skills
+            s.reference = Planned(re_place=True)
         result = run(s, write=False)
     execution = result.execution
     return {
@@ -67,11 +75,13 @@ def run_one(name: str, mode: str, time_limit: float | None) -> dict:
     }
 
 
-def spawn(name: str, mode: str, time_limit: float | None) -> dict:
+def spawn(name: str, mode: str, time_limit: float | None, skills: str = "") -> dict:
     """One problem in a fresh process; its row, with the whole process's wall time."""
     cmd = [sys.executable, __file__, "--one", name, "--mode", mode]
     if time_limit is not None:
         cmd += ["--time-limit", str(time_limit)]
+    if skills:
+        cmd += ["--skills", skills]
     t0 = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True)
     wall = time.perf_counter() - t0
@@ -94,10 +104,11 @@ def main() -> None:
     parser.add_argument("--time-limit", type=float, default=None, help="planner limit, s")
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--json", type=Path, help="also write the rows here")
+    parser.add_argument("--skills", default="", help="learned skills' folder (default: classical)")
     parser.add_argument("--one", help=argparse.SUPPRESS)  # worker: run one problem
     args = parser.parse_args()
     if args.one:
-        print(json.dumps(run_one(args.one, args.mode, args.time_limit)))
+        print(json.dumps(run_one(args.one, args.mode, args.time_limit, args.skills)))
         return
 
     from cake_drake.symbolic.blocksworld import suite_problems
@@ -105,7 +116,8 @@ def main() -> None:
     lo, hi = args.sizes
     problems = suite_problems(range(lo, hi + 1), range(args.seeds))
     print(machine())
-    print(f"mode {args.mode}, planner auto, {len(problems)} problems, one process each")
+    layer = f"skills {args.skills}" if args.skills else "classical geometric layer"
+    print(f"mode {args.mode}, planner auto, {layer}, {len(problems)} problems, one process each")
     print(" | ".join(COLUMNS))
     print(" | ".join("---" for _ in COLUMNS))
     rows = []
@@ -113,7 +125,7 @@ def main() -> None:
     def job(p):
         name, naming, _ = p
         n, seed = (int(x) for x in name.rsplit("-", 2)[1:])
-        return n, seed, naming.name, spawn(name, args.mode, args.time_limit)
+        return n, seed, naming.name, spawn(name, args.mode, args.time_limit, args.skills)
 
     with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         for n, seed, naming, row in pool.map(job, problems):
