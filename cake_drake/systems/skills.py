@@ -40,7 +40,9 @@ nothing here imports the learning code. Its ``action_space`` (an attribute, defa
   come from damped least squares (:class:`cake_drake.geometric.ik.DlsIk`, seeded at the
   last target), as under the demonstrator that recorded such a skill; a move it cannot
   reach keeps the last target. A hand stopped short of where it was last sent takes its
-  move from there, at most ``LEAD`` on (:meth:`LearnedSkills._short`).
+  move from there, at most ``LEAD`` on (:meth:`LearnedSkills._short`); a hand goes down
+  only once over where it goes down to, as the classical layer's does from its pre-grasp
+  pose (:meth:`LearnedSkills._over`).
 
 With ``smooth_s`` > 0, the joint targets reach the controller through a critically
 damped filter that settles on each in about ``smooth_s``
