@@ -116,11 +116,12 @@ def test_a_skill_blind_to_quarter_turns_keeps_the_wrist_mid_range():
 
     from pydrake.math import RigidTransform, RotationMatrix
 
+    from cake_drake.geometric.waypoints import WaypointParams
     from cake_drake.learning.policies.relative_skill import RelativeSkill
     from cake_drake.systems.skills import LearnedSkills, SkillProgress
 
     assert RelativeSkill.free_quarter_turns
-    system = SimpleNamespace(_params=None)
+    system = SimpleNamespace(_params=WaypointParams())
     turn = lambda prog, hand, dyaw: LearnedSkills._wrist_turn(system, prog, cubes, hand, dyaw, 0.25)  # noqa: E731
     hand_at = lambda yaw, p: RigidTransform(RotationMatrix.MakeZRotation(yaw), p)  # noqa: E731
     pick = SkillProgress(context=SimpleNamespace(target=None, cube="a"))
@@ -243,7 +244,7 @@ def test_a_hand_goes_down_only_once_over_where_it_goes_down_to():
     from cake_drake.geometric.waypoints import WaypointParams
     from cake_drake.systems.skills import ALIGNED, LearnedSkills
 
-    system = SimpleNamespace(_params=None)
+    system = SimpleNamespace(_params=WaypointParams())
     approach = WaypointParams().approach
     cube = np.array([0.565, -0.097, 0.06])  # the top of a two-cube tower
     cubes = {"b": RigidTransform(cube), "a": RigidTransform([0.47, -0.29, 0.02])}

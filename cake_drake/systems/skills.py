@@ -201,8 +201,8 @@ class LearnedSkills(LeafSystem):
         #: the hand may then take whichever quarter turn of its answer keeps the wrist
         #: mid-range (:meth:`_wrist_turn`).
         self._free_turns = bool(getattr(skill, "free_quarter_turns", False))
-        self.budget, self.meaning, self._params = budget, meaning, waypoints
-        self._clearance = getattr(waypoints, "transit_clearance", 0.05)
+        self.budget, self.meaning = budget, meaning
+        self._params = waypoints or WaypointParams()
         #: Wall-clock budget (s) of one answer (a skill may carry its own, as a policy does).
         self._budget_s = getattr(skill, "act_budget_s", ACT_BUDGET_S)
         self.period_s = 1.0 / rate_hz
@@ -251,7 +251,7 @@ class LearnedSkills(LeafSystem):
             if prog.working < 0 or prog.error is not None:
                 self._set(state, prog)
                 return
-        if effects_hold(prog.context, cubes, X_WG, finger, self._clearance):
+        if effects_hold(prog.context, cubes, X_WG, finger, self._params.transit_clearance):
             self._set(state, self._end(prog, True))
             return
         if prog.steps >= self.budget:
@@ -335,7 +335,7 @@ class LearnedSkills(LeafSystem):
         to = cube if action.target is None else action.target + (hand - cube)
         if np.hypot(*(to[:2] - hand[:2])) <= ALIGNED:
             return dz
-        approach = (self._params or WaypointParams()).approach
+        approach = self._params.approach
         lowest = min(z, to[2] + approach)
         return max(dz, lowest - z)
 
@@ -355,7 +355,7 @@ class LearnedSkills(LeafSystem):
         if wrist is None:
             action = prog.context
             where = action.target if action.target is not None else cubes[action.cube].translation()
-            wrist = comfortable_yaw(where, self._params or WaypointParams())
+            wrist = comfortable_yaw(where, self._params)
             wrist = nearest_turn(hand + dyaw, wrist)
         goal = nearest_turn(hand + dyaw, wrist)
         return float(np.clip(goal - hand, -most, most)), wrist
