@@ -67,19 +67,30 @@ def execute(job: dict) -> dict:
     """Run one job: ``{"id", "scenario" (YAML text), "collect" (list), "scratch" (a folder
     for its files while it runs; optional)}`` ->
     ``{"row": dict, "files": {name: bytes}}``. Never raises for a failing run."""
-    from pydrake.common.yaml import yaml_load_typed
-
     from cake_drake import pipeline  # noqa: F401 - imported before the clock starts
-    from cake_drake.errors import CakeDrakeError
-    from cake_drake.scenario import Scenario, dump_scenario
 
     row = empty_row(job)
     row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
-    files: dict[str, bytes] = {}
     t0 = time.perf_counter()
-    scenario = None
     scratch = job.get("scratch")  # the sweep's own scratch folder, where it can be seen
     scratch = scratch if scratch and os.path.isdir(scratch) else None
+    # Every temporary file of the run (the cake's drawing, a planner's files) goes there
+    # too: a worker killed mid-run leaves nothing the sweep does not remove.
+    was, tempfile.tempdir = tempfile.tempdir, scratch or tempfile.tempdir
+    try:
+        return _execute(job, row, t0, scratch)
+    finally:
+        tempfile.tempdir = was
+
+
+def _execute(job: dict, row: dict, t0: float, scratch: str | None) -> dict:
+    from pydrake.common.yaml import yaml_load_typed
+
+    from cake_drake.errors import CakeDrakeError
+    from cake_drake.scenario import Scenario, dump_scenario
+
+    files: dict[str, bytes] = {}
+    scenario = None
     with tempfile.TemporaryDirectory(prefix="cake-drake-run-", dir=scratch) as tmp:
         folder = Path(tmp) / "out"
         try:
