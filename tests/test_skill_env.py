@@ -252,7 +252,7 @@ def test_a_hand_goes_down_only_once_over_where_it_goes_down_to():
 
     def down(action, hand, dz, base=None):
         X_WG = RigidTransform(hand)
-        return LearnedSkills._over(system, action, cubes, X_WG, base or X_WG, dz)
+        return LearnedSkills._over(system, action, cubes, X_WG, base or X_WG, [0.0, 0.0, dz])
 
     high = cube + [0.0, -0.042, 0.08]  # 4.2 cm across, 8 cm above
     assert down(unstack, high, -0.05) == pytest.approx(approach - 0.08)  # to 6 cm above
@@ -276,3 +276,74 @@ def test_a_hand_goes_down_only_once_over_where_it_goes_down_to():
     assert down(stack, holding(target + [0.2, 0.1, 0.2]), -0.05) == -0.05  # 20 cm above
     assert down(stack, holding(target + [0.03, 0.0, 0.07]), -0.03) == pytest.approx(approach - 0.07)
     assert down(stack, holding(target + [0.005, 0.0, 0.07]), -0.03) == -0.03  # over it
+
+
+def test_a_crossing_hand_keeps_above_the_towers_beside_its_way():
+    """Set off from the top of a five-cube tower it had just stacked on, a hand went down
+    at once toward a cube on the table and its fingers swept the tower's top cube off; a
+    cube carried down toward the table met a two-cube tower on its way (eight cubes in
+    tall towers). While crossing, a hand keeps ``approach`` above every cube within
+    ``REACH`` of its way this period, as well as above where it goes down to."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.geometric.waypoints import WaypointParams
+    from cake_drake.systems.skills import REACH, LearnedSkills
+
+    system = SimpleNamespace(_params=WaypointParams())
+    approach = WaypointParams().approach
+    top = np.array([0.541, -0.1, 0.18])  # a five-cube tower's top cube
+    cubes = {"d": RigidTransform(top), "e": RigidTransform([0.541, 0.1, 0.02])}
+    pick = SimpleNamespace(cube="e", target=None)
+    hand = RigidTransform(top + [0.0, 0.0, 0.069])
+
+    def down(move, at=hand):
+        return LearnedSkills._over(system, pick, cubes, at, at, move)
+
+    # Off toward the table cube: held at the tower's top cube + approach, not the table's.
+    assert down([0.007, 0.02, -0.033]) == pytest.approx(approach - 0.069)
+    # The same move from a hand further than REACH from the tower: down as answered.
+    away = RigidTransform(top + [0.0, REACH + 0.01, 0.069])
+    assert down([0.0, 0.02, -0.033], away) == -0.033
+    # A tower behind the hand (on the line of its way, not within REACH of it): no bar.
+    beyond = RigidTransform(top + [0.0, -(REACH + 0.03), 0.069])
+    assert down([0.0, -0.01, -0.033], beyond) == -0.033
+    # A hand already lower than the bar goes no lower, and goes up when it answers up.
+    low = RigidTransform(top + [0.0, 0.03, 0.03])
+    assert down([0.0, 0.02, -0.02], low) == 0.0
+    assert down([0.0, 0.02, 0.01], low) == 0.01
+
+
+def test_a_cube_is_let_go_only_where_it_rests_on_its_target():
+    """A skill carrying a cube across the table opened 15 cm short of its target and
+    dropped it beside another tower (eight cubes in tall towers). While the place's cube is
+    in the fingers and not resting on its target, a decision to open is held."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.systems.skills import ALIGNED, SEATED, LearnedSkills
+
+    target = np.array([0.16, -0.52, 0.10])
+    stack = SimpleNamespace(cube="e", target=target)
+    fingers = SimpleNamespace(get_value=lambda: np.array([0.02, 0.02, 0.0, 0.0]))
+    context = SimpleNamespace(get_discrete_state=lambda group: fingers)
+    system = SimpleNamespace(_groups={"finger_state": 0})
+
+    def width(cube_at, hand_at, asked):
+        cubes = {"e": RigidTransform(cube_at)}
+        return LearnedSkills._let_go(system, stack, cubes, RigidTransform(hand_at), asked, context)
+
+    far = target + [0.15, 0.05, 0.05]
+    assert width(far, far + [0.002, 0.0, 0.001], 0.08) == 0.04  # held: 15 cm short
+    assert width(far, far, 0.02) == 0.02  # closing further is the skill's to say
+    above = target + [0.0, 0.0, SEATED + 0.005]
+    assert width(above, above, 0.08) == 0.04  # over it, still 1.5 cm up
+    seated = target + [ALIGNED * 0.6, 0.0, 0.002]
+    assert width(seated, seated, 0.08) == 0.08  # resting on it: let go
+    # Not in the fingers (dropped, or let go already): the skill's decision stands.
+    assert width(far, far + [0.0, 0.0, 0.06], 0.08) == 0.08
+    pick = SimpleNamespace(cube="e", target=None)
+    cubes = {"e": RigidTransform(far)}
+    assert LearnedSkills._let_go(system, pick, cubes, RigidTransform(far), 0.08, context) == 0.08

@@ -42,7 +42,9 @@ nothing here imports the learning code. Its ``action_space`` (an attribute, defa
   reach keeps the last target. A hand stopped short of where it was last sent takes its
   move from there, at most ``LEAD`` on (:meth:`LearnedSkills._short`); a hand goes down
   only once over where it goes down to, as the classical layer's does from its pre-grasp
-  pose (:meth:`LearnedSkills._over`).
+  pose, and keeps above the cubes beside its way while crossing
+  (:meth:`LearnedSkills._over`); a place's cube is let go only where it rests on its
+  target (:meth:`LearnedSkills._let_go`).
 
 With ``smooth_s`` > 0, the joint targets reach the controller through a critically
 damped filter that settles on each in about ``smooth_s``
@@ -121,6 +123,13 @@ LEAD = 0.02
 #: a place puts its cube) keeps above it by the classical pre-grasp height
 #: (``WaypointParams.approach``): it goes down only once over it (:meth:`_over`).
 ALIGNED = 0.01
+#: m: how far across from the hand's way a cube stands in it: the open fingers' half-span
+#: with a finger's width (5 cm) and a cube's half-diagonal (2.8 cm). While crossing, the
+#: hand keeps above every such cube by ``approach`` as well (:meth:`LearnedSkills._over`).
+REACH = 0.08
+#: m: a place's cube is let go only once it is this close to resting on its target
+#: (``ALIGNED`` across); a skill's decision to open elsewhere is held (:meth:`_let_go`).
+SEATED = 0.01
 
 
 def effects_hold(
@@ -288,10 +297,11 @@ class LearnedSkills(LeafSystem):
                 prog = replace(prog, wrist=wrist)
             last = reference_target(self._groups, context)
             base = self._short(prog, X_WG, last)
-            move[2] = self._over(prog.context, cubes, X_WG, base, move[2])
+            move[2] = self._over(prog.context, cubes, X_WG, base, move[:3])
             q = spaces.ee_target(move[:6], base, self.ik, last, self.counts, down=True)
             prog = replace(prog, hand=tuple(X_WG.translation()))
             target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
+            width = self._let_go(prog.context, cubes, X_WG, width, context)
         else:
             target, width = answer[:7], float(np.clip(answer[7], 0.0, GRIPPER_MAX))
         hold_target(self._groups, context, state, target, self.smooth_s)
@@ -320,24 +330,53 @@ class LearnedSkills(LeafSystem):
             short *= LEAD / far
         return RigidTransform(X_WG.rotation(), X_WG.translation() + short)
 
-    def _over(self, action: SkillContext, cubes, X_WG, base: RigidTransform, dz: float) -> float:
-        """The move ``dz`` (m) from ``base`` (:meth:`_short`) a hand measured at ``X_WG`` may
-        take this period: while it is more than ``ALIGNED`` across from where it goes down
-        to (the cube a pick takes; for a place, where the hand is when its cube rests on
-        its target), not below that point by the classical pre-grasp height
-        (``approach``); a hand already lower goes no lower. The classical layer goes down
-        only over the cube, from its pre-grasp pose; a skill that cut the corner went down
-        while still 4 cm across, its leading finger came down on the top cube of the tower
-        it was to unstack and knocked it off (problem_5), and a held cube came down on the
-        edge of its tower and tilted it."""
+    def _over(self, action: SkillContext, cubes, X_WG, base: RigidTransform, move) -> float:
+        """The move down or up (m) a hand measured at ``X_WG`` may take this period, of
+        ``move`` (dx dy dz) from ``base`` (:meth:`_short`): while it is more than ``ALIGNED``
+        across from where it goes down to (the cube a pick takes; for a place, where the
+        hand is when its cube rests on its target), not below that point, nor below any
+        other cube within ``REACH`` of its way this period, by the classical pre-grasp
+        height (``approach``); a hand already lower goes no lower. The classical layer
+        goes down only over the cube, from its pre-grasp pose, and crosses at the transit
+        height. A skill that cut the corner went down while still 4 cm across, its leading
+        finger came down on the top cube of the tower it was to unstack and knocked it off
+        (problem_5); set off from the top of a five-cube tower it had just stacked on, it
+        went down at once toward a cube on the table and its fingers swept the tower's top
+        cube off; a cube carried down toward the table met a two-cube tower on the way
+        (eight cubes in tall towers)."""
         hand, z = X_WG.translation(), base.translation()[2]
+        dz = float(move[2])
         cube = cubes[action.cube].translation()
         to = cube if action.target is None else action.target + (hand - cube)
         if np.hypot(*(to[:2] - hand[:2])) <= ALIGNED:
             return dz
-        approach = self._params.approach
-        lowest = min(z, to[2] + approach)
+        a, b = hand[:2], base.translation()[:2] + np.asarray(move[:2], float)
+        floor = to[2]
+        for name, X in cubes.items():
+            at = X.translation()
+            if name != action.cube and _across(at[:2], a, b) <= REACH:
+                floor = max(floor, at[2])
+        lowest = min(z, floor + self._params.approach)
         return max(dz, lowest - z)
+
+    def _let_go(self, action: SkillContext, cubes, X_WG, width: float, context) -> float:
+        """The gripper's width this period, of the skill's ``width``: while a place's cube
+        is in the fingers (its centre within ``SEATED`` + half a cube of the grasp frame)
+        and not yet resting on its target (more than ``ALIGNED`` across from it or
+        ``SEATED`` above it), a decision to open is held at the fingers' present command.
+        The classical layer opens only at the place pose; a skill carrying a cube across
+        a tall tower's table opened 15 cm short of its target and dropped it there
+        (eight cubes in tall towers)."""
+        if action.target is None:
+            return width
+        was = 2.0 * context.get_discrete_state(self._groups["finger_state"]).get_value()[0]
+        cube = cubes[action.cube].translation()
+        if width <= was or np.linalg.norm(cube - X_WG.translation()) > SEATED + CUBE_SIZE / 2:
+            return width
+        off = cube - action.target
+        if np.hypot(*off[:2]) <= ALIGNED and off[2] <= SEATED:
+            return width
+        return was
 
     def _wrist_turn(self, prog: SkillProgress, cubes, X_WG, dyaw: float, most: float):
         """The turn of the hand this period (at most ``most`` rad) for a skill that reads
@@ -454,3 +493,10 @@ class LearnedSkills(LeafSystem):
             phase = 1.0 if prog.context.target is None else 4.0
         labels = np.array([phase, float(prog.working)])
         state.get_mutable_discrete_state(self._groups["labels"]).set_value(labels)
+
+
+def _across(point, a, b) -> float:
+    """How far (m) ``point`` is from the segment ``a``-``b`` (x y)."""
+    ab = b - a
+    t = float(np.clip(np.dot(point - a, ab) / max(float(np.dot(ab, ab)), 1e-12), 0.0, 1.0))
+    return float(np.hypot(*(point - (a + t * ab))))
