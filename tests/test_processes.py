@@ -223,7 +223,9 @@ def test_fast_downward_ends_with_its_caller(tmp_path, sig):
         stderr=subprocess.PIPE,
         text=True,
         start_new_session=True,
-        env={**os.environ, "PYTHONFAULTHANDLER": "1"},  # SIGABRT shows where it hangs
+        # SIGABRT shows where it hangs; a caller killed outright cannot remove its
+        # temporary folder, so it makes it here, not in the machine's /tmp.
+        env={**os.environ, "PYTHONFAULTHANDLER": "1", "TMPDIR": str(tmp_path)},
     )
     fd: list[tuple[int, int]] = []
     try:
