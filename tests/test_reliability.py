@@ -96,6 +96,43 @@ def test_a_skill_that_hangs_is_stopped_at_its_budget_naming_it(monkeypatch, tmp_
     assert f"skill '{tmp_path.resolve()}'" in str(e.value) and "0.5 s" in str(e.value)
 
 
+class _StandingSkill:
+    """A skill that moves the hand and answers no move at all, its gripper open."""
+
+    action_space = "ee_delta"
+
+    def reset(self):
+        pass
+
+    def act(self, observation):
+        return np.r_[np.zeros(6), 1.0]
+
+
+def standing_skill(path, device, ensemble=0.0):
+    return _StandingSkill()
+
+
+def test_a_skill_whose_hand_stands_still_ends_its_try_there(monkeypatch, tmp_path):
+    """A hand stood still with its action not done ends its try after ``STALL_S``, not at
+    its budget: three tries of 2 s, not of 15, and the message and the summary say so."""
+    from cake_drake.systems.skills import DEFAULT_BUDGET, STALL_S
+
+    monkeypatch.setattr("cake_drake.scenario.SKILL_POLICY", f"{__name__}:standing_skill")
+    monkeypatch.setattr("cake_drake.pipeline.SKILL_CHECK", f"{__name__}:_no_check")
+    monkeypatch.syspath_prepend(str(Path(__file__).parent))
+    s = Scenario()
+    s.motion.skills = str(tmp_path)
+    s.outputs.render = False
+    result = run(s, write=False)
+    assert not result.success
+    assert f"in 3 tries of {DEFAULT_BUDGET} steps each" in result.message, result.message
+    assert f"(the last ended with the hand still for {STALL_S:g} s)" in result.message
+    skills = result.execution.monitoring["skills"]
+    assert skills["stood_still"] == 3 and skills["budget_ran_out"] == 0
+    assert skills["steps"] < 3 * (STALL_S * 10 + 2)  # three stalls (10 Hz), no budget
+    assert result.execution.sim_s < 3 * DEFAULT_BUDGET / 10 / 2
+
+
 def test_the_lerobot_env_offers_only_learning_tasks():
     from cake_drake.learning.envs.lerobot_env import CakeDrakeEnv
 

@@ -88,14 +88,21 @@ def test_its_reward_terms_are_the_stack_env_s_names():
 def test_the_fingers_move_at_their_speed_whatever_the_skill_decides():
     """A gripper decision comes as a step (open, then closed at once); the fingers'
     command moves at their speed (``FINGER_SPEED``, as the classical layer's close and
-    every demonstrator's): closing on a pick's empty air takes two control periods, and
-    the first ends with the fingers a cube's width apart. A step command slammed them shut
-    in one period, and the cube they closed on was kicked round in the grasp."""
+    every demonstrator's): closed round a pick's cube, the first control period ends
+    with the fingers a cube's width apart, on it. A step command slammed them shut in one
+    period, and the cube they closed on was kicked round in the grasp."""
     from cake_drake.systems.skills import FINGER_SPEED
 
     env = gymnasium.make(ENV_ID, blocks=(3, 4), actions="picks", rate_hz=10.0)
     obs, info = env.reset(seed=0)
     assert info["action"] in ("pick-up", "unstack") and obs[-1] > 0.079  # open, high up
+    lead = env.unwrapped._lead
+    for _ in range(100):  # the demonstrator's moves down to the cube, the fingers open
+        if np.abs(obs[4:7]).max() < 0.006 and obs[-1] > 0.079:
+            break
+        obs, *_ = env.step(np.r_[lead.act({"observation.relative": obs})[:6], 1.0])
+    else:
+        pytest.fail(f"the hand never came round the cube: {obs[4:7]}")
     stay_and_close = np.zeros(7)
     widths = []
     for _ in range(3):
@@ -103,7 +110,7 @@ def test_the_fingers_move_at_their_speed_whatever_the_skill_decides():
         widths.append(float(obs[-1]))
     a_period = 2 * FINGER_SPEED * 0.1  # m of width
     assert widths[0] == pytest.approx(0.08 - a_period, abs=0.003), widths
-    assert widths[2] < 0.003, widths
+    assert all(0.03 < w < 0.042 for w in widths[1:]), widths  # on the cube, not shut
 
 
 def test_a_skill_blind_to_quarter_turns_keeps_the_wrist_mid_range():
@@ -248,7 +255,7 @@ def test_a_hand_goes_down_only_once_over_where_it_goes_down_to():
     approach = WaypointParams().approach
     cube = np.array([0.565, -0.097, 0.06])  # the top of a two-cube tower
     cubes = {"b": RigidTransform(cube), "a": RigidTransform([0.47, -0.29, 0.02])}
-    unstack = SimpleNamespace(cube="b", target=None)
+    unstack = SimpleNamespace(cube="b", target=None, other="a")
 
     def down(action, hand, dz, base=None):
         X_WG = RigidTransform(hand)
@@ -266,7 +273,7 @@ def test_a_hand_goes_down_only_once_over_where_it_goes_down_to():
 
     # A place: where the hand goes down to is the target, less the cube in the hand.
     target = np.array([0.47, -0.29, 0.06])  # onto "a"
-    stack = SimpleNamespace(cube="b", target=target)
+    stack = SimpleNamespace(cube="b", target=target, other="a")
     off = np.array([0.003, -0.002, 0.001])  # the hand, from the cube in its fingers
 
     def holding(cube_at):
@@ -295,7 +302,7 @@ def test_a_crossing_hand_keeps_above_the_towers_beside_its_way():
     approach = WaypointParams().approach
     top = np.array([0.541, -0.1, 0.18])  # a five-cube tower's top cube
     cubes = {"d": RigidTransform(top), "e": RigidTransform([0.541, 0.1, 0.02])}
-    pick = SimpleNamespace(cube="e", target=None)
+    pick = SimpleNamespace(cube="e", target=None, other=None)
     hand = RigidTransform(top + [0.0, 0.0, 0.069])
 
     def down(move, at=hand):
@@ -315,35 +322,112 @@ def test_a_crossing_hand_keeps_above_the_towers_beside_its_way():
     assert down([0.0, 0.02, 0.01], low) == 0.01
 
 
-def test_a_cube_is_let_go_only_where_it_rests_on_its_target():
-    """A skill carrying a cube across the table opened 15 cm short of its target and
-    dropped it beside another tower (eight cubes in tall towers). While the place's cube is
-    in the fingers and not resting on its target, a decision to open is held."""
+def test_the_fingers_close_only_around_the_cube_and_open_only_where_it_rests():
+    """From a home pose 2 cm over a ten-cube tower's top, a skill closed its fingers on air
+    and sat over the cube as if it held it; carrying a cube across the table, a skill
+    opened 15 cm short of its target and dropped it beside another tower. A decision to
+    close while the pick's cube is not between the fingers, or to open while the place's
+    cube is in them and not resting on its target, is held."""
     from types import SimpleNamespace
 
     from pydrake.math import RigidTransform
 
-    from cake_drake.systems.skills import ALIGNED, SEATED, LearnedSkills
+    from cake_drake.systems.skills import SEATED, LearnedSkills
 
-    target = np.array([0.16, -0.52, 0.10])
-    stack = SimpleNamespace(cube="e", target=target)
-    fingers = SimpleNamespace(get_value=lambda: np.array([0.02, 0.02, 0.0, 0.0]))
+    fingers = SimpleNamespace(value=np.array([0.02, 0.02, 0.0, 0.0]))
+    fingers.get_value = lambda: fingers.value
     context = SimpleNamespace(get_discrete_state=lambda group: fingers)
     system = SimpleNamespace(_groups={"finger_state": 0})
 
-    def width(cube_at, hand_at, asked):
+    def width(action, cube_at, hand_at, asked):
         cubes = {"e": RigidTransform(cube_at)}
-        return LearnedSkills._let_go(system, stack, cubes, RigidTransform(hand_at), asked, context)
+        X_WG = RigidTransform(hand_at)
+        return LearnedSkills._gripper(system, action, cubes, X_WG, asked, context)
 
+    target = np.array([0.16, -0.52, 0.10])
+    stack = SimpleNamespace(cube="e", target=target)
     far = target + [0.15, 0.05, 0.05]
-    assert width(far, far + [0.002, 0.0, 0.001], 0.08) == 0.04  # held: 15 cm short
-    assert width(far, far, 0.02) == 0.02  # closing further is the skill's to say
+    assert width(stack, far, far + [0.002, 0.0, 0.001], 0.08) == 0.04  # held: 15 cm short
+    assert width(stack, far, far, 0.02) == 0.02  # closing further is the skill's to say
     above = target + [0.0, 0.0, SEATED + 0.005]
-    assert width(above, above, 0.08) == 0.04  # over it, still 1.5 cm up
-    seated = target + [ALIGNED * 0.6, 0.0, 0.002]
-    assert width(seated, seated, 0.08) == 0.08  # resting on it: let go
+    assert width(stack, above, above, 0.08) == 0.04  # over it, still 1.5 cm up
+    seated = target + [0.015, 0.0, 0.002]
+    assert width(stack, seated, seated, 0.08) == 0.08  # resting on it, 1.5 cm across: let go
+    off = target + [0.025, 0.0, 0.002]
+    assert width(stack, off, off, 0.08) == 0.04  # its centre off the support's top
     # Not in the fingers (dropped, or let go already): the skill's decision stands.
-    assert width(far, far + [0.0, 0.0, 0.06], 0.08) == 0.08
-    pick = SimpleNamespace(cube="e", target=None)
-    cubes = {"e": RigidTransform(far)}
-    assert LearnedSkills._let_go(system, pick, cubes, RigidTransform(far), 0.08, context) == 0.08
+    assert width(stack, far, far + [0.0, 0.0, 0.06], 0.08) == 0.08
+
+    fingers.value = np.array([0.04, 0.04, 0.0, 0.0])  # open
+    unstack = SimpleNamespace(cube="e", target=None)
+    top = np.array([0.541, -0.1, 0.38])  # a ten-cube tower's top cube
+    home = top + [-0.078, 0.1, 0.023]
+    assert width(unstack, top, home, 0.0) == 0.08  # 12 cm across: stays open
+    assert width(unstack, top, top + [0.0, 0.0, 0.03], 0.0) == 0.08  # 3 cm over it
+    assert width(unstack, top, top + [0.004, -0.003, 0.005], 0.0) == 0.0  # around it: closes
+    assert width(unstack, top, home, 0.08) == 0.08  # opening is the skill's to say
+
+
+def test_a_place_s_hand_goes_back_up_clear_of_the_cube_it_placed():
+    """Stacked on the tallest tower, the cube rose above the transit height of the towers
+    as they stood; the skill went back up to that height and sat 4 mm under where the
+    action counts as done. Once the fingers have let go, the transit height it reads is
+    the classical retract's, clear of the placed cube, where the action's own is lower."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.geometric.waypoints import WaypointParams
+    from cake_drake.systems.skills import LearnedSkills
+
+    system = SimpleNamespace(_params=WaypointParams())
+    clearance = WaypointParams().transit_clearance
+    cube = np.array([0.164, -0.517, 0.26])
+    cubes = {"g": RigidTransform(cube)}
+    stack = SimpleNamespace(cube="g", target=cube)
+    hand = RigidTransform(cube + [0.0, 0.0, 0.066])
+    skill = np.zeros(13, np.float32)
+    skill[12] = 0.31 - 0.326  # the action's transit height, 1.6 cm under the hand
+
+    def read(width, action=stack):
+        return LearnedSkills._clear(system, action, cubes, skill, hand, width)
+
+    after = 0.26 + 0.04 + clearance - 0.326
+    assert read(0.08)[12] == pytest.approx(after)  # let go: up clear of the cube
+    assert read(0.04)[12] == skill[12]  # still holding it: the action's own
+    assert read(0.08, SimpleNamespace(cube="g", target=None))[12] == skill[12]  # a pick
+    skill[12] = 0.2
+    assert read(0.08)[12] == pytest.approx(0.2)  # the action's own is higher already
+
+
+def test_a_held_back_hand_is_held_where_it_was_sent_and_a_put_down_is_over_half_a_cube():
+    """Under a 0.5 kg cube the hand sags below where it is sent: held where it was
+    measured each period, it crept down a centimetre every few periods while still
+    across from its place. A hand held back goes no lower than where it was last sent;
+    and a put-down's place, a free spot of the table, counts as under the hand within
+    half a cube (the hand stood 1.5 cm short of it, held, until its tries ran out)."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.geometric.waypoints import WaypointParams
+    from cake_drake.systems.skills import LearnedSkills
+
+    system = SimpleNamespace(_params=WaypointParams())
+    target = np.array([0.47, 0.27, 0.02])
+    at = target + [0.015, -0.015, 0.045]  # 2.1 cm across, 4.5 cm up
+    cubes = {"b": RigidTransform(at)}
+    stack = SimpleNamespace(cube="b", target=target, other="a")
+    put_down = SimpleNamespace(cube="b", target=target, other=None)
+    hand = RigidTransform(at)
+
+    def down(action, move, sent=None):
+        return LearnedSkills._over(system, action, cubes, hand, hand, move, sent)
+
+    assert down(stack, [0.0, 0.0, -0.01]) == 0.0  # no lower than it is
+    assert down(stack, [0.0, 0.0, -0.01], sent=at[2] + 0.006) == pytest.approx(0.006)
+    assert down(stack, [0.0, 0.0, -0.01], sent=at[2] - 0.004) == 0.0  # sent lower: as is
+    assert down(put_down, [0.0, 0.0, -0.01]) == 0.0  # 2.1 cm: more than half a cube
+    cubes["b"] = hand = RigidTransform(target + [0.012, -0.012, 0.045])  # 1.7 cm
+    assert down(put_down, [0.0, 0.0, -0.01]) == -0.01
+    assert down(stack, [0.0, 0.0, -0.01]) == 0.0

@@ -43,8 +43,8 @@ nothing here imports the learning code. Its ``action_space`` (an attribute, defa
   move from there, at most ``LEAD`` on (:meth:`LearnedSkills._short`); a hand goes down
   only once over where it goes down to, as the classical layer's does from its pre-grasp
   pose, and keeps above the cubes beside its way while crossing
-  (:meth:`LearnedSkills._over`); a place's cube is let go only where it rests on its
-  target (:meth:`LearnedSkills._let_go`).
+  (:meth:`LearnedSkills._over`); the fingers close only around the cube a pick takes
+  and open only where a place's cube rests (:meth:`LearnedSkills._gripper`).
 
 With ``smooth_s`` > 0, the joint targets reach the controller through a critically
 damped filter that settles on each in about ``smooth_s``
@@ -115,6 +115,9 @@ SKILL_SPACES = {"joint_position": 8, "ee_delta": 7}
 #: m: a skill that never sees the arm reads a destination further across as one this far,
 #: on the way around the arm's base (:meth:`LearnedSkills._around`).
 AROUND = 0.15
+#: s: a hand that moves a skill's hand and has stood still this long (the action not done)
+#: ends its try, as its budget would (:meth:`LearnedSkills._update`).
+STALL_S = 2.0
 #: m: a hand that moved less than this in a control period has stopped; a stopped hand's
 #: next move is taken from where it was last sent, at most ``LEAD`` on (``_short``).
 STILL = 0.001
@@ -127,9 +130,12 @@ ALIGNED = 0.01
 #: with a finger's width (5 cm) and a cube's half-diagonal (2.8 cm). While crossing, the
 #: hand keeps above every such cube by ``approach`` as well (:meth:`LearnedSkills._over`).
 REACH = 0.08
-#: m: a place's cube is let go only once it is this close to resting on its target
-#: (``ALIGNED`` across); a skill's decision to open elsewhere is held (:meth:`_let_go`).
+#: m: a place's cube is let go only once it is this close above resting on its target
+#: (and over its support's top); a decision to open elsewhere is held
+#: (:meth:`LearnedSkills._gripper`).
 SEATED = 0.01
+#: m: fingers this much wider than a cube have let go of it.
+RELEASED = 0.004
 
 
 def effects_hold(
@@ -173,6 +179,10 @@ class SkillProgress:
     wrist: float | None = None
     #: m: where the hand was measured at the last period (x y z), for :meth:`_short`.
     hand: tuple[float, float, float] | None = None
+    #: Control periods in a row the hand has stood still (moved less than ``STILL``), and
+    #: the tries of the run ended so (``STALL_S``).
+    still: int = 0
+    stalled: int = 0
 
     def __deepcopy__(self, memo):
         return self
@@ -266,6 +276,16 @@ class LearnedSkills(LeafSystem):
         if prog.steps >= self.budget:
             self._set(state, self._end(prog, False))
             return
+        if self.space == "ee_delta" and prog.hand is not None:
+            # A hand stood still with its action not done is at a point the skill answers
+            # with no move: its try ends there, not at its budget, 13 s of simulated time
+            # later (the skill is reset for the next; a skill with no history answers the
+            # same from the same place, one with history may not).
+            moved = np.linalg.norm(X_WG.translation() - prog.hand) >= STILL
+            prog = replace(prog, still=0 if moved else prog.still + 1)
+            if prog.still * self.period_s >= STALL_S:
+                self._set(state, self._end(replace(prog, stalled=prog.stalled + 1), False))
+                return
         observation = self._observe(context, prog.context, cubes, X_WG)
         # Guarded as every plug-in's answer: what it raises, or an answer slower than its
         # budget, stops the run in one line naming the skill.
@@ -297,11 +317,12 @@ class LearnedSkills(LeafSystem):
                 prog = replace(prog, wrist=wrist)
             last = reference_target(self._groups, context)
             base = self._short(prog, X_WG, last)
-            move[2] = self._over(prog.context, cubes, X_WG, base, move[:3])
+            sent = float(self.ik.kin.pose(last).translation()[2])
+            move[2] = self._over(prog.context, cubes, X_WG, base, move[:3], sent)
             q = spaces.ee_target(move[:6], base, self.ik, last, self.counts, down=True)
             prog = replace(prog, hand=tuple(X_WG.translation()))
             target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
-            width = self._let_go(prog.context, cubes, X_WG, width, context)
+            width = self._gripper(prog.context, cubes, X_WG, width, context)
         else:
             target, width = answer[:7], float(np.clip(answer[7], 0.0, GRIPPER_MAX))
         hold_target(self._groups, context, state, target, self.smooth_s)
@@ -330,25 +351,33 @@ class LearnedSkills(LeafSystem):
             short *= LEAD / far
         return RigidTransform(X_WG.rotation(), X_WG.translation() + short)
 
-    def _over(self, action: SkillContext, cubes, X_WG, base: RigidTransform, move) -> float:
+    def _over(
+        self, action: SkillContext, cubes, X_WG, base: RigidTransform, move, sent=None
+    ) -> float:
         """The move down or up (m) a hand measured at ``X_WG`` may take this period, of
         ``move`` (dx dy dz) from ``base`` (:meth:`_short`): while it is more than ``ALIGNED``
         across from where it goes down to (the cube a pick takes; for a place, where the
-        hand is when its cube rests on its target), not below that point, nor below any
-        other cube within ``REACH`` of its way this period, by the classical pre-grasp
-        height (``approach``); a hand already lower goes no lower. The classical layer
-        goes down only over the cube, from its pre-grasp pose, and crosses at the transit
-        height. A skill that cut the corner went down while still 4 cm across, its leading
-        finger came down on the top cube of the tower it was to unstack and knocked it off
-        (problem_5); set off from the top of a five-cube tower it had just stacked on, it
-        went down at once toward a cube on the table and its fingers swept the tower's top
-        cube off; a cube carried down toward the table met a two-cube tower on the way
-        (eight cubes in tall towers)."""
+        hand is when its cube rests on its target; half a cube for a put-down), not below
+        that point, nor below any other cube within ``REACH`` of its way this period, by
+        the classical pre-grasp height (``approach``); a hand already lower goes no lower
+        than it is, or than ``sent``, the height it was last sent to, when that is higher
+        (under a 0.5 kg cube the hand sags below where it is sent; held where it was
+        measured, period after period, it crept down a centimetre every few periods). The
+        classical layer goes down only over the cube, from its pre-grasp pose, and crosses
+        at the transit height. A skill that cut the corner went down while still 4 cm
+        across, its leading finger came down on the top cube of the tower it was to
+        unstack and knocked it off (problem_5); set off from the top of a five-cube tower
+        it had just stacked on, it went down at once toward a cube on the table and its
+        fingers swept the tower's top cube off; a cube carried down toward the table met a
+        two-cube tower on the way (eight cubes in tall towers)."""
         hand, z = X_WG.translation(), base.translation()[2]
         dz = float(move[2])
         cube = cubes[action.cube].translation()
         to = cube if action.target is None else action.target + (hand - cube)
-        if np.hypot(*(to[:2] - hand[:2])) <= ALIGNED:
+        # A put-down's place is a free spot of the table: half a cube from the one planned
+        # is as good, and under a 0.5 kg cube the hand stood 1.5 cm short of it, held.
+        putting_down = action.target is not None and action.other is None
+        if np.hypot(*(to[:2] - hand[:2])) <= (CUBE_SIZE / 2 if putting_down else ALIGNED):
             return dz
         a, b = hand[:2], base.translation()[:2] + np.asarray(move[:2], float)
         floor = to[2]
@@ -356,25 +385,33 @@ class LearnedSkills(LeafSystem):
             at = X.translation()
             if name != action.cube and _across(at[:2], a, b) <= REACH:
                 floor = max(floor, at[2])
-        lowest = min(z, floor + self._params.approach)
+        lowest = min(z if sent is None else max(z, sent), floor + self._params.approach)
         return max(dz, lowest - z)
 
-    def _let_go(self, action: SkillContext, cubes, X_WG, width: float, context) -> float:
-        """The gripper's width this period, of the skill's ``width``: while a place's cube
-        is in the fingers (its centre within ``SEATED`` + half a cube of the grasp frame)
-        and not yet resting on its target (more than ``ALIGNED`` across from it or
-        ``SEATED`` above it), a decision to open is held at the fingers' present command.
-        The classical layer opens only at the place pose; a skill carrying a cube across
-        a tall tower's table opened 15 cm short of its target and dropped it there
-        (eight cubes in tall towers)."""
-        if action.target is None:
-            return width
+    def _gripper(self, action: SkillContext, cubes, X_WG, width: float, context) -> float:
+        """The gripper's width this period, of the skill's ``width``: the fingers close only
+        around the cube a pick takes, and open only where a place's cube rests. A decision
+        to close while the pick's cube is not between the fingers (its centre further
+        across than half a cube from the grasp frame, or further up or down than half a
+        cube), or to open while the place's cube is in the fingers (its centre within
+        ``SEATED`` + half a cube of the grasp frame) and not resting on its target (further
+        across than half a cube, off its support's top, or more than ``SEATED`` above it),
+        is held at the fingers' present command. The classical layer closes only at the
+        grasp pose and opens only at the place pose; from a home pose 2 cm above the top
+        of a ten-cube tower, a skill closed its fingers on air at its first period and
+        then sat over the cube as if it held it (ten cubes in tall towers), and a skill
+        carrying a cube across the table opened 15 cm short of its target and dropped it
+        beside another tower (eight cubes in tall towers)."""
         was = 2.0 * context.get_discrete_state(self._groups["finger_state"]).get_value()[0]
-        cube = cubes[action.cube].translation()
-        if width <= was or np.linalg.norm(cube - X_WG.translation()) > SEATED + CUBE_SIZE / 2:
+        cube, hand = cubes[action.cube].translation(), X_WG.translation()
+        if action.target is None:  # a pick: close only around its cube
+            off = cube - hand
+            around = np.hypot(*off[:2]) <= CUBE_SIZE / 2 and abs(off[2]) <= CUBE_SIZE / 2
+            return was if width < was and not around else width
+        if width <= was or np.linalg.norm(cube - hand) > SEATED + CUBE_SIZE / 2:
             return width
         off = cube - action.target
-        if np.hypot(*off[:2]) <= ALIGNED and off[2] <= SEATED:
+        if np.hypot(*off[:2]) <= CUBE_SIZE / 2 and off[2] <= SEATED:
             return width
         return was
 
@@ -408,8 +445,30 @@ class LearnedSkills(LeafSystem):
             "observation.state": np.r_[arm[:7], width].astype(np.float32),
             "observation.skill": skill,
             # What a skill that never sees the arm reads: no joint, no absolute height.
-            "observation.relative": relative_vector(self._around(action, skill, X_WG), width),
+            "observation.relative": relative_vector(
+                self._clear(action, cubes, self._around(action, skill, X_WG), X_WG, width),
+                width,
+            ),
         }
+
+    def _clear(self, action: SkillContext, cubes, skill: np.ndarray, X_WG, width: float):
+        """``skill`` as a skill that never sees the arm reads it once a place's fingers
+        have let go of its cube: the transit height the hand goes back up to is then the
+        classical retract's, clear of the cube just placed by ``transit_clearance`` (the
+        height :func:`effects_hold` asks for), where the action's own is below it. Stacked
+        on the tallest tower, the cube rose above the transit height of the towers as they
+        stood before; the skill went back up to that height, read as its own, and sat 4 mm
+        under where the action counts as done until its budget ran out (ten cubes in
+        tall towers)."""
+        if action.target is None or width <= CUBE_SIZE + RELEASED:
+            return skill
+        cube = cubes[action.cube].translation()
+        after = cube[2] + CUBE_SIZE + self._params.transit_clearance - X_WG.translation()[2]
+        if after <= skill[12]:
+            return skill
+        out = skill.copy()
+        out[12] = after
+        return out
 
     def _around(self, action: SkillContext, skill: np.ndarray, X_WG) -> np.ndarray:
         """``observation.skill`` as a skill that never sees the arm reads it: a destination
@@ -455,7 +514,14 @@ class LearnedSkills(LeafSystem):
         guarded(f"skill {self.label!r}", self.skill.reset, exit_code=DURING,
                 budget_s=self._budget_s)  # fmt: skip
         return replace(
-            prog, working=cmd.index, action=cmd.action, context=ctx, steps=0, wrist=None, hand=None
+            prog,
+            working=cmd.index,
+            action=cmd.action,
+            context=ctx,
+            steps=0,
+            wrist=None,
+            hand=None,
+            still=0,
         )
 
     def _end(self, prog: SkillProgress, held: bool) -> SkillProgress:
@@ -467,6 +533,8 @@ class LearnedSkills(LeafSystem):
                 f"skill {self.label!r} did not do {prog.action} in {MAX_TRIES} tries of "
                 f"{self.budget} steps each"
             )
+            if prog.still * self.period_s >= STALL_S:
+                error += f" (the last ended with the hand still for {STALL_S:g} s)"
         return replace(
             prog,
             done=prog.done + 1,
