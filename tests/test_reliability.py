@@ -126,7 +126,7 @@ def test_a_skill_whose_hand_stands_still_ends_its_try_there(monkeypatch, tmp_pat
     result = run(s, write=False)
     assert not result.success
     assert f"in 3 tries of {DEFAULT_BUDGET} steps each" in result.message, result.message
-    assert f"(the last ended with the hand still for {STALL_S:g} s)" in result.message
+    assert f"; the last ended with the hand still for {STALL_S:g} s" in result.message
     skills = result.execution.monitoring["skills"]
     assert skills["stood_still"] == 3 and skills["budget_ran_out"] == 0
     assert skills["steps"] < 3 * (STALL_S * 10 + 2)  # three stalls (10 Hz), no budget

@@ -54,12 +54,12 @@ a motion, continuous in position and velocity, rather than a 10 Hz staircase.
 An action ends when its effects hold in the measured world (:func:`effects_hold`): a
 picked cube in the closed hand at the transit height, or a placed cube resting where
 the action puts it with the hand open and back up at the transit height. It also ends
-when it runs out of its ``budget`` of control periods: either way ``actions_done``
+when it runs out of its ``budget`` of control periods, or, for a skill that moves the
+hand, when the hand has stood still for ``STALL_S``: either way ``actions_done``
 counts it and the action source judges the world, as after a classical action (the
 monitor repeats an action whose effects are missing, or replans). The same ground action
-failing
-:data:`MAX_TRIES` times in a row stops the run, named; so does a skill that answers
-NaN (exit 3, naming the skill and the action).
+failing :data:`MAX_TRIES` times in a row stops the run, named; so does a skill that
+answers NaN (exit 3, naming the skill and the action).
 """
 
 from __future__ import annotations
@@ -534,7 +534,7 @@ class LearnedSkills(LeafSystem):
                 f"{self.budget} steps each"
             )
             if prog.still * self.period_s >= STALL_S:
-                error += f" (the last ended with the hand still for {STALL_S:g} s)"
+                error += f"; the last ended with the hand still for {STALL_S:g} s"
         return replace(
             prog,
             done=prog.done + 1,
