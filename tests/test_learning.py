@@ -11,6 +11,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import gymnasium
@@ -227,7 +228,7 @@ def test_train_writes_a_lerobot_checkpoint_with_the_tasks_recipe(trained):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("policy", ["act", "diffusion"])
-def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, policy):
+def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, policy, monkeypatch):
     r = cake("train", str(trained / "ds"), "--out", str(tmp_path / "run"), "--policy", policy,
              "--steps", "2", "--batch-size", "2", "--device", "cpu")  # fmt: skip
     assert r.returncode == 0, r.stderr
@@ -248,9 +249,15 @@ def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, po
                          control_mode="joint_position")  # fmt: skip
     acting = make(str(tmp_path / "run"), "cpu")
     obs, _ = env.reset(seed=3)
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
     acting.reset(env.unwrapped.policy_task, 3)
     action = acting.act(obs)
     assert action.shape == (8,) and np.all(np.isfinite(action))
+    # LeRobot's config reader leaves a tmp*.json a load; loading it leaves none (torch's
+    # own compile cache, torchinductor_<user>, is a cache it keeps there on purpose).
+    assert list(scratch.glob("*.json")) == []
 
 
 @pytest.mark.slow

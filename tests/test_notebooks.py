@@ -80,6 +80,9 @@ def test_notebook_runs(name, tmp_path, monkeypatch):
         )
     )
     monkeypatch.chdir(tmp_path)
+    # A notebook keeps its plots in a temporary folder of its own, for a student to open
+    # after; run here, that folder goes in the test's, not in the machine's /tmp.
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
     before = sorted(NOTEBOOKS_DIR.iterdir())
     _refresh_module().execute(nb, tmp_path, quick=True)  # raises on any error, naming the cell
 

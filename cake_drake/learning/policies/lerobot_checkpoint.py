@@ -22,6 +22,7 @@ import contextlib
 import io
 import json
 import struct
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -287,7 +288,14 @@ class CheckpointPolicy:
 
         import cake_drake.learning.policies.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
 
-        config = PreTrainedConfig.from_pretrained(self.folder)
+        # LeRobot's reader writes the config to a temporary file it never removes (one
+        # tmp*.json in the machine's temporary folder a load): made in a folder of ours.
+        with tempfile.TemporaryDirectory(prefix="cake-drake-config-") as tmp:
+            was, tempfile.tempdir = tempfile.tempdir, tmp
+            try:
+                config = PreTrainedConfig.from_pretrained(self.folder)
+            finally:
+                tempfile.tempdir = was
         config.device = self.device
         with contextlib.redirect_stdout(io.StringIO()):  # lerobot prints where it loads from
             policy = get_policy_class(config.type).from_pretrained(self.folder, config=config)
