@@ -229,6 +229,12 @@ def test_train_writes_a_lerobot_checkpoint_with_the_tasks_recipe(trained):
 @pytest.mark.slow
 @pytest.mark.parametrize("policy", ["act", "diffusion"])
 def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, policy, monkeypatch):
+    # LeRobot's config reader leaves a tmp*.json a read: the training and the load here
+    # leave none.
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setenv("TMPDIR", str(scratch))
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
     r = cake("train", str(trained / "ds"), "--out", str(tmp_path / "run"), "--policy", policy,
              "--steps", "2", "--batch-size", "2", "--device", "cpu")  # fmt: skip
     assert r.returncode == 0, r.stderr
@@ -249,14 +255,10 @@ def test_lerobots_own_policies_train_on_the_same_recording(trained, tmp_path, po
                          control_mode="joint_position")  # fmt: skip
     acting = make(str(tmp_path / "run"), "cpu")
     obs, _ = env.reset(seed=3)
-    scratch = tmp_path / "tmp"
-    scratch.mkdir()
-    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
     acting.reset(env.unwrapped.policy_task, 3)
     action = acting.act(obs)
     assert action.shape == (8,) and np.all(np.isfinite(action))
-    # LeRobot's config reader leaves a tmp*.json a load; loading it leaves none (torch's
-    # own compile cache, torchinductor_<user>, is a cache it keeps there on purpose).
+    # (torch's compile cache, torchinductor_<user>, is a cache it keeps there on purpose)
     assert list(scratch.glob("*.json")) == []
 
 
@@ -350,7 +352,8 @@ def lerobot_cli(line: str, cwd: Path):
     exe = Path(sys.executable).parent / name
     return subprocess.run(
         [str(exe), *argv], cwd=cwd, capture_output=True, text=True, timeout=600,
-        env={**os.environ, "HF_HUB_OFFLINE": "1"},
+        # LeRobot's own config readers leave a tmp*.json a read: here, in the test's folder.
+        env={**os.environ, "HF_HUB_OFFLINE": "1", "TMPDIR": str(cwd)},
     )  # fmt: skip
 
 

@@ -255,6 +255,20 @@ def check_folder(path: Path, action_space: str, device: str = "auto", cameras=No
     return folder
 
 
+@contextlib.contextmanager
+def lerobot_temporaries():
+    """While inside, Python's temporary files go in a folder of this process's own,
+    removed after. LeRobot's config reader (``PreTrainedConfig.from_pretrained``) writes
+    the config to a temporary file it never removes: one tmp*.json in the machine's
+    temporary folder a load."""
+    with tempfile.TemporaryDirectory(prefix="cake-drake-lerobot-") as tmp:
+        was, tempfile.tempdir = tempfile.tempdir, tmp
+        try:
+            yield
+        finally:
+            tempfile.tempdir = was
+
+
 class CheckpointPolicy:
     """See the module's docstring."""
 
@@ -288,14 +302,8 @@ class CheckpointPolicy:
 
         import cake_drake.learning.policies.mlp.configuration_mlp  # noqa: F401 - registers cake_mlp
 
-        # LeRobot's reader writes the config to a temporary file it never removes (one
-        # tmp*.json in the machine's temporary folder a load): made in a folder of ours.
-        with tempfile.TemporaryDirectory(prefix="cake-drake-config-") as tmp:
-            was, tempfile.tempdir = tempfile.tempdir, tmp
-            try:
-                config = PreTrainedConfig.from_pretrained(self.folder)
-            finally:
-                tempfile.tempdir = was
+        with lerobot_temporaries():
+            config = PreTrainedConfig.from_pretrained(self.folder)
         config.device = self.device
         with contextlib.redirect_stdout(io.StringIO()):  # lerobot prints where it loads from
             policy = get_policy_class(config.type).from_pretrained(self.folder, config=config)
