@@ -21,6 +21,9 @@ process group, runs ``cmd`` in that group and passes its exit status on. The gro
 When ``cmd`` ends by itself, the guard kills whatever it left behind in the group before
 passing its status on. Plain standard library: the guard runs this file as a script
 (``python -I -S``), so it imports nothing of the project's.
+
+:func:`temporaries_in` is the same care for files: what a call leaves in the temporary
+folder goes in one the caller removes.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator, Sequence
 
 #: The signals the guard answers by killing its group (the death signal is the first).
@@ -93,6 +97,18 @@ def owned(cmd: Sequence[str], **popen_kwargs) -> Iterator[subprocess.Popen]:
         yield proc
     finally:
         stop(proc)
+
+
+@contextlib.contextmanager
+def temporaries_in(folder: str | None) -> Iterator[None]:
+    """While inside, Python's temporary files (:mod:`tempfile`'s, in this process) go in
+    ``folder`` (``None``: where they would anyway): a library that leaves its own behind,
+    or a run killed before it removes its, leaves them in a folder its caller removes."""
+    was, tempfile.tempdir = tempfile.tempdir, folder or tempfile.tempdir
+    try:
+        yield
+    finally:
+        tempfile.tempdir = was
 
 
 @atexit.register

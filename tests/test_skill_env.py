@@ -209,23 +209,21 @@ def test_a_hand_stopped_short_of_where_it_was_sent_takes_its_next_move_from_ther
     same place: the shortfall never added up. A hand that has stopped (moved less than
     ``STILL`` in a period) takes its next move from where it was last sent, at most
     ``LEAD`` on; a moving hand, or the first period of an action, from where it is."""
-    from types import SimpleNamespace
 
     from pydrake.math import RigidTransform
 
     from cake_drake.geometric.ik import Kinematics
     from cake_drake.systems.skills import LEAD, STILL, LearnedSkills, SkillProgress
 
-    kin = Kinematics()
-    system = SimpleNamespace(ik=SimpleNamespace(kin=kin))
     last = np.array([0.0, 0.1, 0.0, -2.2, 0.0, 2.3, 0.8])  # the joints it was sent to
-    sent = kin.pose(last)
+    sent = Kinematics().pose(last)
+    to = sent.translation()
     hand = RigidTransform(sent.rotation(), sent.translation() - [0.004, 0.009, 0.0])
     p = hand.translation()
 
     def base(was):
         prog = SkillProgress(hand=None if was is None else tuple(was))
-        return LearnedSkills._short(system, prog, hand, last).translation()
+        return LearnedSkills._short(None, prog, hand, to).translation()
 
     np.testing.assert_allclose(base(p + [0.0, 0.0, STILL / 2]), sent.translation())
     np.testing.assert_array_equal(base(p + [0.0, 2 * STILL, 0.0]), p)  # still moving
@@ -233,7 +231,7 @@ def test_a_hand_stopped_short_of_where_it_was_sent_takes_its_next_move_from_ther
     far = RigidTransform(sent.rotation(), sent.translation() - [0.0, 0.05, 0.0])
     prog = SkillProgress(hand=tuple(far.translation()))
     np.testing.assert_allclose(
-        LearnedSkills._short(system, prog, far, last).translation(),
+        LearnedSkills._short(None, prog, far, to).translation(),
         far.translation() + [0.0, LEAD, 0.0],
     )
 

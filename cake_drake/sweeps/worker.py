@@ -68,6 +68,7 @@ def execute(job: dict) -> dict:
     for its files while it runs; optional)}`` ->
     ``{"row": dict, "files": {name: bytes}}``. Never raises for a failing run."""
     from cake_drake import pipeline  # noqa: F401 - imported before the clock starts
+    from cake_drake.processes import temporaries_in
 
     row = empty_row(job)
     row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
@@ -76,11 +77,8 @@ def execute(job: dict) -> dict:
     scratch = scratch if scratch and os.path.isdir(scratch) else None
     # Every temporary file of the run (the cake's drawing, a planner's files) goes there
     # too: a worker killed mid-run leaves nothing the sweep does not remove.
-    was, tempfile.tempdir = tempfile.tempdir, scratch or tempfile.tempdir
-    try:
+    with temporaries_in(scratch):
         return _execute(job, row, t0, scratch)
-    finally:
-        tempfile.tempdir = was
 
 
 def _execute(job: dict, row: dict, t0: float, scratch: str | None) -> dict:

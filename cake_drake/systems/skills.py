@@ -316,9 +316,9 @@ class LearnedSkills(LeafSystem):
                 move[5], wrist = self._wrist_turn(prog, cubes, X_WG, move[5], high[5])
                 prog = replace(prog, wrist=wrist)
             last = reference_target(self._groups, context)
-            base = self._short(prog, X_WG, last)
-            sent = float(self.ik.kin.pose(last).translation()[2])
-            move[2] = self._over(prog.context, cubes, X_WG, base, move[:3], sent)
+            sent = self.ik.kin.pose(last).translation()  # where the hand was last sent
+            base = self._short(prog, X_WG, sent)
+            move[2] = self._over(prog.context, cubes, X_WG, base, move[:3], float(sent[2]))
             q = spaces.ee_target(move[:6], base, self.ik, last, self.counts, down=True)
             prog = replace(prog, hand=tuple(X_WG.translation()))
             target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
@@ -335,17 +335,17 @@ class LearnedSkills(LeafSystem):
         state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
         self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))
 
-    def _short(self, prog: SkillProgress, X_WG: RigidTransform, last) -> RigidTransform:
+    def _short(self, prog: SkillProgress, X_WG: RigidTransform, sent) -> RigidTransform:
         """Where a move of the hand is taken from: the hand as measured, or, when it has
-        stopped (moved less than ``STILL`` since the last period) short of where it was
-        last sent, that place (at most ``LEAD`` on from the hand). Taken from the measured
-        hand alone, a move the controller falls short of by a steady error is sent again
-        to the same place: under a 0.5 kg cube the hand held a stack 9 mm across from its
-        place, the skill answering the 9 mm period after period. From where it was sent,
-        the shortfall adds up, period by period, until the hand moves."""
+        stopped (moved less than ``STILL`` since the last period) short of ``sent`` (x y z,
+        where it was last sent), that place (at most ``LEAD`` on from the hand). Taken from
+        the measured hand alone, a move the controller falls short of by a steady error is
+        sent again to the same place: under a 0.5 kg cube the hand held a stack 9 mm across
+        from its place, the skill answering the 9 mm period after period. From where it was
+        sent, the shortfall adds up, period by period, until the hand moves."""
         if prog.hand is None or np.linalg.norm(X_WG.translation() - prog.hand) >= STILL:
             return X_WG
-        short = self.ik.kin.pose(last).translation() - X_WG.translation()
+        short = np.asarray(sent, float) - X_WG.translation()
         far = float(np.linalg.norm(short))
         if far > LEAD:
             short *= LEAD / far

@@ -34,6 +34,7 @@ from cake_drake.learning.data.dataset import require_lerobot
 from cake_drake.learning.policies.mlp.acting import load as load_mlp
 from cake_drake.learning.policies.mlp.features import EXTRA_INPUTS, OBS_IMAGES, OBS_STATE
 from cake_drake.policy.observations import GOAL_START
+from cake_drake.processes import temporaries_in
 
 #: Action size of each action space a checkpoint can answer in (a chunk is not learned).
 ACTION_SIZE = {"joint_position": 8, "ee_delta": 7}
@@ -261,12 +262,8 @@ def lerobot_temporaries():
     removed after. LeRobot's config reader (``PreTrainedConfig.from_pretrained``) writes
     the config to a temporary file it never removes: one tmp*.json in the machine's
     temporary folder a load."""
-    with tempfile.TemporaryDirectory(prefix="cake-drake-lerobot-") as tmp:
-        was, tempfile.tempdir = tempfile.tempdir, tmp
-        try:
-            yield
-        finally:
-            tempfile.tempdir = was
+    with tempfile.TemporaryDirectory(prefix="cake-drake-lerobot-") as tmp, temporaries_in(tmp):
+        yield
 
 
 class CheckpointPolicy:
