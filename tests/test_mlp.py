@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from cake_drake.learning.policies.lerobot_checkpoint import lerobot_temporaries
 from cake_drake.learning.policies.mlp.configuration_mlp import CakeMLPConfig
 from cake_drake.learning.policies.mlp.modeling_mlp import CakeMLPPolicy
 
@@ -109,7 +110,9 @@ def test_the_queue_serves_n_action_steps_then_asks_again():
 def test_statistics_travel_with_the_weights(tmp_path):
     p = policy()
     p.save_pretrained(tmp_path)
-    loaded = CakeMLPPolicy.from_pretrained(tmp_path)  # no dataset statistics given
+    # LeRobot's config reader leaves a tmp*.json a read: the loader's own folder takes it.
+    with lerobot_temporaries():
+        loaded = CakeMLPPolicy.from_pretrained(tmp_path)  # no dataset statistics given
     b = batch()
     assert torch.equal(loaded.predict_action_chunk(b), p.predict_action_chunk(b))
 
