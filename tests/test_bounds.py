@@ -151,10 +151,11 @@ def _alive(pid: int) -> bool:
 
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads /proc")
 def test_the_workers_of_a_killed_sweep_die_with_it(tmp_path):
+    # A sweep killed outright cannot remove its scratch folder: it is left in the test's.
     proc = subprocess.Popen(
         [sys.executable, "-m", "cake_drake.sweep", str(SMOKE), "--out", "out", "--workers", "1"],
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        env={**os.environ, "PYTHONPATH": str(ROOT), "TMPDIR": str(tmp_path)},
     )  # fmt: skip
     workers: list[int] = []
     deadline = time.monotonic() + 120
