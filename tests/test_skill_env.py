@@ -209,7 +209,6 @@ def test_a_hand_stopped_short_of_where_it_was_sent_takes_its_next_move_from_ther
     same place: the shortfall never added up. A hand that has stopped (moved less than
     ``STILL`` in a period) takes its next move from where it was last sent, at most
     ``LEAD`` on; a moving hand, or the first period of an action, from where it is."""
-
     from pydrake.math import RigidTransform
 
     from cake_drake.geometric.ik import Kinematics
@@ -223,7 +222,7 @@ def test_a_hand_stopped_short_of_where_it_was_sent_takes_its_next_move_from_ther
 
     def base(was):
         prog = SkillProgress(hand=None if was is None else tuple(was))
-        return LearnedSkills._short(None, prog, hand, to).translation()
+        return LearnedSkills._short(prog, hand, to).translation()
 
     np.testing.assert_allclose(base(p + [0.0, 0.0, STILL / 2]), sent.translation())
     np.testing.assert_array_equal(base(p + [0.0, 2 * STILL, 0.0]), p)  # still moving
@@ -231,7 +230,7 @@ def test_a_hand_stopped_short_of_where_it_was_sent_takes_its_next_move_from_ther
     far = RigidTransform(sent.rotation(), sent.translation() - [0.0, 0.05, 0.0])
     prog = SkillProgress(hand=tuple(far.translation()))
     np.testing.assert_allclose(
-        LearnedSkills._short(None, prog, far, to).translation(),
+        LearnedSkills._short(prog, far, to).translation(),
         far.translation() + [0.0, LEAD, 0.0],
     )
 
@@ -294,16 +293,21 @@ def test_a_crossing_hand_keeps_above_the_towers_beside_its_way():
     from pydrake.math import RigidTransform
 
     from cake_drake.geometric.waypoints import WaypointParams
-    from cake_drake.systems.skills import REACH, LearnedSkills
+    from cake_drake.systems.skills import AROUND, REACH, LearnedSkills
 
     system = SimpleNamespace(_params=WaypointParams())
     approach = WaypointParams().approach
     top = np.array([0.541, -0.1, 0.18])  # a five-cube tower's top cube
-    cubes = {"d": RigidTransform(top), "e": RigidTransform([0.541, 0.1, 0.02])}
-    pick = SimpleNamespace(cube="e", target=None, other=None)
+    cubes = {
+        "d": RigidTransform(top),
+        "e": RigidTransform(top + [0.0, 0.12, -0.16]),  # on the table, 12 cm across
+        "f": RigidTransform(top + [0.0, -0.21, -0.16]),  # on the table, the other side
+    }
     hand = RigidTransform(top + [0.0, 0.0, 0.069])
 
-    def down(move, at=hand):
+    def down(move, at=hand, cube="e"):
+        pick = SimpleNamespace(cube=cube, target=None, other=None)
+        assert np.hypot(*(cubes[cube].translation() - at.translation())[:2]) < AROUND
         return LearnedSkills._over(system, pick, cubes, at, at, move)
 
     # Off toward the table cube: held at the tower's top cube + approach, not the table's.
@@ -313,11 +317,53 @@ def test_a_crossing_hand_keeps_above_the_towers_beside_its_way():
     assert down([0.0, 0.02, -0.033], away) == -0.033
     # A tower behind the hand (on the line of its way, not within REACH of it): no bar.
     beyond = RigidTransform(top + [0.0, -(REACH + 0.03), 0.069])
-    assert down([0.0, -0.01, -0.033], beyond) == -0.033
+    assert down([0.0, -0.01, -0.033], beyond, "f") == -0.033
     # A hand already lower than the bar goes no lower, and goes up when it answers up.
     low = RigidTransform(top + [0.0, 0.03, 0.03])
     assert down([0.0, 0.02, -0.02], low) == 0.0
     assert down([0.0, 0.02, 0.01], low) == 0.01
+
+
+def test_a_hand_far_from_where_it_goes_down_to_keeps_to_the_transit_height():
+    """A put-down that left the home height for a spot beyond an eight-cube tower went down
+    5 cm a period while the tower was still further than ``REACH`` from its way; once
+    within it, held no lower, its cube pushed the tower's second cube 16 mm (ten cubes in
+    tall towers). Further than ``AROUND`` across from where it goes down to, the hand keeps
+    to the classical transit height of every cube but the one it holds, rising to it at
+    most a step (5 cm) a period; going up, or above it, the skill's move is taken."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.geometric.waypoints import WaypointParams, transit_height
+    from cake_drake.systems.skills import AROUND, LearnedSkills
+
+    params = WaypointParams()
+    system = SimpleNamespace(_params=params)
+    tower = np.array([0.5, 0.0, 0.02 + 7 * 0.04])  # an eight-cube tower's top cube
+    held = np.array([0.5, 0.25, 0.30])  # a cube in the hand, 25 cm across from the tower
+    cubes = {"h": RigidTransform(tower), "c": RigidTransform(held)}
+    spot = np.array([0.5, -0.2, 0.02])  # a put-down's spot beyond the tower
+    put = SimpleNamespace(cube="c", target=spot, other=None)
+    transit = transit_height({"h": cubes["h"]}, None, params)
+    assert transit == pytest.approx(tower[2] + 0.04 + params.transit_clearance)
+
+    def down(hand_z, dz, action=put):
+        X_WG = RigidTransform([0.5, 0.25, hand_z])
+        assert np.hypot(*(action.target - held)[:2]) > AROUND
+        return LearnedSkills._over(system, action, cubes, X_WG, X_WG, [0.0, -0.03, dz])
+
+    assert down(transit + 0.02, -0.05) == pytest.approx(-0.02)  # down to it, no lower
+    assert down(transit - 0.08, -0.05) == pytest.approx(0.05)  # below: up a step a period
+    assert down(transit - 0.01, -0.05) == pytest.approx(0.01)  # the last centimetre
+    assert down(transit - 0.08, 0.05) == 0.05  # going up: as answered
+    assert down(transit + 0.2, -0.05) == -0.05  # well above: as answered
+    # A pick far off: the cube it goes for (the top of a nine-cube tower) is not held.
+    cubes["c"] = RigidTransform(tower + [0.0, -0.2, 0.04])
+    pick = SimpleNamespace(cube="c", target=None, other=None)
+    far = transit_height(cubes, None, params)
+    X_WG = RigidTransform([0.5, 0.25, far])
+    assert LearnedSkills._over(system, pick, cubes, X_WG, X_WG, [0.0, -0.03, -0.05]) == 0.0
 
 
 def test_the_fingers_close_only_around_the_cube_and_open_only_where_it_rests():

@@ -42,8 +42,8 @@ nothing here imports the learning code. Its ``action_space`` (an attribute, defa
   reach keeps the last target. A hand stopped short of where it was last sent takes its
   move from there, at most ``LEAD`` on (:meth:`LearnedSkills._short`); a hand goes down
   only once over where it goes down to, as the classical layer's does from its pre-grasp
-  pose, and keeps above the cubes beside its way while crossing
-  (:meth:`LearnedSkills._over`); the fingers close only around the cube a pick takes
+  pose, keeps above the cubes beside its way while crossing, and keeps to the transit
+  height while further than ``AROUND`` across (:meth:`LearnedSkills._over`); the fingers close only around the cube a pick takes
   and open only where a place's cube rests (:meth:`LearnedSkills._gripper`).
 
 With ``smooth_s`` > 0, the joint targets reach the controller through a critically
@@ -78,6 +78,7 @@ from cake_drake.geometric.waypoints import (
     around_base,
     comfortable_yaw,
     nearest_turn,
+    transit_height,
     yaw_of,
 )
 from cake_drake.plugins import DURING, guarded
@@ -335,7 +336,8 @@ class LearnedSkills(LeafSystem):
         state.get_mutable_discrete_state(self._groups["finger_state"]).set_value(fingers)
         self._set(state, replace(prog, steps=prog.steps + 1, total_steps=prog.total_steps + 1))
 
-    def _short(self, prog: SkillProgress, X_WG: RigidTransform, sent) -> RigidTransform:
+    @staticmethod
+    def _short(prog: SkillProgress, X_WG: RigidTransform, sent) -> RigidTransform:
         """Where a move of the hand is taken from: the hand as measured, or, when it has
         stopped (moved less than ``STILL`` since the last period) short of ``sent`` (x y z,
         where it was last sent), that place (at most ``LEAD`` on from the hand). Taken from
@@ -369,7 +371,13 @@ class LearnedSkills(LeafSystem):
         unstack and knocked it off (problem_5); set off from the top of a five-cube tower
         it had just stacked on, it went down at once toward a cube on the table and its
         fingers swept the tower's top cube off; a cube carried down toward the table met a
-        two-cube tower on the way (eight cubes in tall towers)."""
+        two-cube tower on the way (eight cubes in tall towers). Further than ``AROUND``
+        across (where the skill's own reading of the far target begins, :meth:`_around`),
+        the hand keeps to the classical transit height (:func:`transit_height` of every
+        cube but the held one), rising to it at most a step a period: a put-down that left
+        the home height for a spot beyond an eight-cube tower went down 5 cm a period while
+        the tower was still further than ``REACH`` from its way, and once within it, held
+        no lower, pushed the tower's second cube 16 mm (ten cubes in tall towers)."""
         hand, z = X_WG.translation(), base.translation()[2]
         dz = float(move[2])
         cube = cubes[action.cube].translation()
@@ -377,8 +385,12 @@ class LearnedSkills(LeafSystem):
         # A put-down's place is a free spot of the table: half a cube from the one planned
         # is as good, and under a 0.5 kg cube the hand stood 1.5 cm short of it, held.
         putting_down = action.target is not None and action.other is None
-        if np.hypot(*(to[:2] - hand[:2])) <= (CUBE_SIZE / 2 if putting_down else ALIGNED):
+        across = np.hypot(*(to[:2] - hand[:2]))
+        if across <= (CUBE_SIZE / 2 if putting_down else ALIGNED):
             return dz
+        if across > AROUND:  # far off: the classical transit height, risen to a step a period
+            held = action.cube if action.target is not None else None
+            return max(dz, min(transit_height(cubes, held, self._params) - z, spaces.EE_STEP[2]))
         a, b = hand[:2], base.translation()[:2] + np.asarray(move[:2], float)
         floor = to[2]
         for name, X in cubes.items():
