@@ -412,6 +412,48 @@ def test_the_fingers_close_only_around_the_cube_and_open_only_where_it_rests():
     assert width(unstack, top, home, 0.08) == 0.08  # opening is the skill's to say
 
 
+def test_the_fingers_are_open_away_from_a_pick_s_cube_and_let_go_of_a_place_s():
+    """Under 0.5 kg cubes a skill that had let go of its cube closed its fingers on air
+    going back up, and the next pick began closed, a start no demonstration had: it
+    hovered 9 cm over its cube, never opening; with a cube resting 6 mm from its spot on
+    the table it answered a millimetre's move the pressed cube did not take, and no
+    release, for three tries (``learned_cake``). Out of the fingers, a pick's cube is
+    approached open and a place's, let go, is not closed on again; a place's hand stopped
+    where its cube may be let go lets go."""
+    from types import SimpleNamespace
+
+    from pydrake.math import RigidTransform
+
+    from cake_drake.systems.skills import GRIPPER_MAX, SEATED, LearnedSkills
+
+    fingers = SimpleNamespace(value=np.zeros(4))
+    fingers.get_value = lambda: fingers.value
+    context = SimpleNamespace(get_discrete_state=lambda group: fingers)
+    system = SimpleNamespace(_groups={"finger_state": 0})
+
+    def width(action, cube_at, hand_at, asked, stopped=False):
+        cubes = {"e": RigidTransform(cube_at)}
+        X_WG = RigidTransform(hand_at)
+        return LearnedSkills._gripper(system, action, cubes, X_WG, asked, context, stopped)
+
+    cube = np.array([0.55, -0.08, 0.06])
+    pick = SimpleNamespace(cube="e", target=None)
+    assert width(pick, cube, cube + [0.0, 0.0, 0.086], 0.0) == GRIPPER_MAX  # 9 cm over it
+    assert width(pick, cube, cube + [0.0, 0.0, 0.005], 0.0) == 0.0  # around it: closed
+
+    fingers.value = np.array([0.04, 0.04, 0.0, 0.0])  # open
+    spot = np.array([0.47, 0.28, 0.02])
+    put = SimpleNamespace(cube="e", target=spot)
+    assert width(put, spot, spot + [0.0, 0.0, 0.05], 0.0) == GRIPPER_MAX  # let go: stays open
+
+    fingers.value = np.array([0.02, 0.02, 0.0, 0.0])  # holding the cube
+    rests = spot + [0.001, -0.006, 0.002]  # on the table, 6 mm from its spot
+    assert width(put, rests, rests, 0.0) == 0.0  # moving: the skill's to say
+    assert width(put, rests, rests, 0.0, stopped=True) == GRIPPER_MAX  # stopped: let go
+    above = spot + [0.0, 0.0, SEATED + 0.005]
+    assert width(put, above, above, 0.0, stopped=True) == 0.0  # stopped in the air: held
+
+
 def test_a_place_s_hand_goes_back_up_clear_of_the_cube_it_placed():
     """Stacked on the tallest tower, the cube rose above the transit height of the towers
     as they stood; the skill went back up to that height and sat 4 mm under where the

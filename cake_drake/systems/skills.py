@@ -43,8 +43,11 @@ nothing here imports the learning code. Its ``action_space`` (an attribute, defa
   move from there, at most ``LEAD`` on (:meth:`LearnedSkills._short`); a hand goes down
   only once over where it goes down to, as the classical layer's does from its pre-grasp
   pose, keeps above the cubes beside its way while crossing, and keeps to the transit
-  height while further than ``AROUND`` across (:meth:`LearnedSkills._over`); the fingers close only around the cube a pick takes
-  and open only where a place's cube rests (:meth:`LearnedSkills._gripper`).
+  height while further than ``AROUND`` across (:meth:`LearnedSkills._over`); the
+  fingers close only around the cube a pick takes and open only where a place's cube
+  rests, are open while a pick's cube is out of them and stay open once a place's is,
+  and let go where a place's hand has stopped with its cube resting
+  (:meth:`LearnedSkills._gripper`).
 
 With ``smooth_s`` > 0, the joint targets reach the controller through a critically
 damped filter that settles on each in about ``smooth_s``
@@ -119,6 +122,9 @@ AROUND = 0.15
 #: s: a hand that moves a skill's hand and has stood still this long (the action not done)
 #: ends its try, as its budget would (:meth:`LearnedSkills._update`).
 STALL_S = 2.0
+#: s: a place's hand stopped this long where its cube may be let go (resting on its
+#: target, ``_gripper``) lets go, whatever the skill decides.
+LET_GO_S = 1.0
 #: m: a hand that moved less than this in a control period has stopped; a stopped hand's
 #: next move is taken from where it was last sent, at most ``LEAD`` on (``_short``).
 STILL = 0.001
@@ -323,7 +329,8 @@ class LearnedSkills(LeafSystem):
             q = spaces.ee_target(move[:6], base, self.ik, last, self.counts, down=True)
             prog = replace(prog, hand=tuple(X_WG.translation()))
             target, width = (last if q is None else q), float(move[6]) * GRIPPER_MAX
-            width = self._gripper(prog.context, cubes, X_WG, width, context)
+            stopped = prog.still * self.period_s >= LET_GO_S
+            width = self._gripper(prog.context, cubes, X_WG, width, context, stopped)
         else:
             target, width = answer[:7], float(np.clip(answer[7], 0.0, GRIPPER_MAX))
         hold_target(self._groups, context, state, target, self.smooth_s)
@@ -400,7 +407,9 @@ class LearnedSkills(LeafSystem):
         lowest = min(z if sent is None else max(z, sent), floor + self._params.approach)
         return max(dz, lowest - z)
 
-    def _gripper(self, action: SkillContext, cubes, X_WG, width: float, context) -> float:
+    def _gripper(
+        self, action: SkillContext, cubes, X_WG, width: float, context, stopped: bool = False
+    ) -> float:
         """The gripper's width this period, of the skill's ``width``: the fingers close only
         around the cube a pick takes, and open only where a place's cube rests. A decision
         to close while the pick's cube is not between the fingers (its centre further
@@ -413,19 +422,35 @@ class LearnedSkills(LeafSystem):
         of a ten-cube tower, a skill closed its fingers on air at its first period and
         then sat over the cube as if it held it (ten cubes in tall towers), and a skill
         carrying a cube across the table opened 15 cm short of its target and dropped it
-        beside another tower (eight cubes in tall towers)."""
+        beside another tower (eight cubes in tall towers).
+
+        Out of the fingers (its centre further than ``SEATED`` + half a cube from the grasp
+        frame), a pick's cube is approached with the fingers open, whatever the skill
+        decides, and a place's cube, let go, is not closed on again: as the classical
+        layer's fingers, open from its pre-grasp pose and from its release to its retract.
+        Under 0.5 kg cubes a skill that had let go of its cube closed its fingers on air
+        while going back up, and the next pick began closed, a start no demonstration
+        had: the skill hovered 9 cm over its cube, never opening (``learned_cake``). A
+        place's hand ``stopped`` (still for ``LET_GO_S``) where its cube may be let go
+        lets go: with a 0.5 kg cube resting 6 mm from its spot on the table, the skill
+        answered a millimetre's move the pressed cube did not take, and no release, for
+        three tries (``learned_cake``)."""
         was = 2.0 * context.get_discrete_state(self._groups["finger_state"]).get_value()[0]
         cube, hand = cubes[action.cube].translation(), X_WG.translation()
-        if action.target is None:  # a pick: close only around its cube
+        out = np.linalg.norm(cube - hand) > SEATED + CUBE_SIZE / 2
+        if action.target is None:  # a pick: open until its cube is near, close only around it
+            if out:
+                return GRIPPER_MAX
             off = cube - hand
             around = np.hypot(*off[:2]) <= CUBE_SIZE / 2 and abs(off[2]) <= CUBE_SIZE / 2
             return was if width < was and not around else width
-        if width <= was or np.linalg.norm(cube - hand) > SEATED + CUBE_SIZE / 2:
-            return width
+        if out:  # let go, or dropped: the fingers close no further
+            return max(width, was)
         off = cube - action.target
-        if np.hypot(*off[:2]) <= CUBE_SIZE / 2 and off[2] <= SEATED:
-            return width
-        return was
+        rests = np.hypot(*off[:2]) <= CUBE_SIZE / 2 and off[2] <= SEATED
+        if rests and stopped:
+            return GRIPPER_MAX
+        return width if width <= was or rests else was
 
     def _wrist_turn(self, prog: SkillProgress, cubes, X_WG, dyaw: float, most: float):
         """The turn of the hand this period (at most ``most`` rad) for a skill that reads
