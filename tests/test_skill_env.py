@@ -369,14 +369,16 @@ def test_a_hand_far_from_where_it_goes_down_to_keeps_to_the_transit_height():
 def test_the_fingers_close_only_around_the_cube_and_open_only_where_it_rests():
     """From a home pose 2 cm over a ten-cube tower's top, a skill closed its fingers on air
     and sat over the cube as if it held it; carrying a cube across the table, a skill
-    opened 15 cm short of its target and dropped it beside another tower. A decision to
-    close while the pick's cube is not between the fingers, or to open while the place's
-    cube is in them and not resting on its target, is held."""
+    opened 15 cm short of its target and dropped it beside another tower; under 0.5 kg
+    cubes a skill opened over its support still 5 to 15 mm across. A decision to close
+    while the pick's cube is not between the fingers, or to open while the place's cube is
+    in them and not resting on its target (a stack's within ``CENTRED`` across), is
+    held."""
     from types import SimpleNamespace
 
     from pydrake.math import RigidTransform
 
-    from cake_drake.systems.skills import SEATED, LearnedSkills
+    from cake_drake.systems.skills import CENTRED, SEATED, LearnedSkills
 
     fingers = SimpleNamespace(value=np.array([0.02, 0.02, 0.0, 0.0]))
     fingers.get_value = lambda: fingers.value
@@ -389,16 +391,21 @@ def test_the_fingers_close_only_around_the_cube_and_open_only_where_it_rests():
         return LearnedSkills._gripper(system, action, cubes, X_WG, asked, context)
 
     target = np.array([0.16, -0.52, 0.10])
-    stack = SimpleNamespace(cube="e", target=target)
+    stack = SimpleNamespace(cube="e", target=target, other="d")
     far = target + [0.15, 0.05, 0.05]
     assert width(stack, far, far + [0.002, 0.0, 0.001], 0.08) == 0.04  # held: 15 cm short
     assert width(stack, far, far, 0.02) == 0.02  # closing further is the skill's to say
     above = target + [0.0, 0.0, SEATED + 0.005]
     assert width(stack, above, above, 0.08) == 0.04  # over it, still 1.5 cm up
+    seated = target + [0.003, 0.0, 0.002]
+    assert width(stack, seated, seated, 0.08) == 0.08  # resting on it, 3 mm across: let go
+    off = target + [CENTRED + 0.001, 0.0, 0.002]
+    assert width(stack, off, off, 0.08) == 0.04  # off centre by more than CENTRED: held
+    put = SimpleNamespace(cube="e", target=target, other=None)  # a put-down's free spot
     seated = target + [0.015, 0.0, 0.002]
-    assert width(stack, seated, seated, 0.08) == 0.08  # resting on it, 1.5 cm across: let go
+    assert width(put, seated, seated, 0.08) == 0.08  # 1.5 cm across: as good
     off = target + [0.025, 0.0, 0.002]
-    assert width(stack, off, off, 0.08) == 0.04  # its centre off the support's top
+    assert width(put, off, off, 0.08) == 0.04  # more than half a cube across
     # Not in the fingers (dropped, or let go already): the skill's decision stands.
     assert width(stack, far, far + [0.0, 0.0, 0.06], 0.08) == 0.08
 
@@ -443,7 +450,7 @@ def test_the_fingers_are_open_away_from_a_pick_s_cube_and_let_go_of_a_place_s():
 
     fingers.value = np.array([0.04, 0.04, 0.0, 0.0])  # open
     spot = np.array([0.47, 0.28, 0.02])
-    put = SimpleNamespace(cube="e", target=spot)
+    put = SimpleNamespace(cube="e", target=spot, other=None)
     assert width(put, spot, spot + [0.0, 0.0, 0.05], 0.0) == GRIPPER_MAX  # let go: stays open
 
     fingers.value = np.array([0.02, 0.02, 0.0, 0.0])  # holding the cube

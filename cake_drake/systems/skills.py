@@ -101,7 +101,7 @@ from cake_drake.systems.waypoint_ik import (
     hold_target,
     reference_target,
 )
-from cake_drake.world.facts import read_facts
+from cake_drake.world.facts import STACK_TOL, read_facts
 from cake_drake.world.scene import CUBE_SIZE
 
 #: m below the transit height the grasp frame may be when a pick or a place counts as done.
@@ -141,6 +141,10 @@ REACH = 0.08
 #: (and over its support's top); a decision to open elsewhere is held
 #: (:meth:`LearnedSkills._gripper`).
 SEATED = 0.01
+#: m: a stack's cube is let go only this close across to centred over its support, as
+#: its demonstrator sets down again a goal's stacked cube further off (``LOOSE`` in
+#: :mod:`cake_drake.learning.policies.expert`); a put-down's anywhere within half a cube.
+CENTRED = 0.8 * STACK_TOL
 #: m: fingers this much wider than a cube have let go of it.
 RELEASED = 0.004
 
@@ -416,7 +420,8 @@ class LearnedSkills(LeafSystem):
         across than half a cube from the grasp frame, or further up or down than half a
         cube), or to open while the place's cube is in the fingers (its centre within
         ``SEATED`` + half a cube of the grasp frame) and not resting on its target (further
-        across than half a cube, off its support's top, or more than ``SEATED`` above it),
+        across than ``CENTRED`` for a stack or half a cube for a put-down, or more than
+        ``SEATED`` above it),
         is held at the fingers' present command. The classical layer closes only at the
         grasp pose and opens only at the place pose; from a home pose 2 cm above the top
         of a ten-cube tower, a skill closed its fingers on air at its first period and
@@ -434,7 +439,11 @@ class LearnedSkills(LeafSystem):
         place's hand ``stopped`` (still for ``LET_GO_S``) where its cube may be let go
         lets go: with a 0.5 kg cube resting 6 mm from its spot on the table, the skill
         answered a millimetre's move the pressed cube did not take, and no release, for
-        three tries (``learned_cake``)."""
+        three tries (``learned_cake``). A stack's cube rests on its target only within
+        ``CENTRED`` across of it: under 0.5 kg cubes the hand came down onto the support
+        still 5 to 15 mm across, its move answered toward the centre, and the skill
+        decided to open there; the monitor found the cube off and had it set down and
+        stacked again, and again (``learned_cake``)."""
         was = 2.0 * context.get_discrete_state(self._groups["finger_state"]).get_value()[0]
         cube, hand = cubes[action.cube].translation(), X_WG.translation()
         out = np.linalg.norm(cube - hand) > SEATED + CUBE_SIZE / 2
@@ -447,7 +456,8 @@ class LearnedSkills(LeafSystem):
         if out:  # let go, or dropped: the fingers close no further
             return max(width, was)
         off = cube - action.target
-        rests = np.hypot(*off[:2]) <= CUBE_SIZE / 2 and off[2] <= SEATED
+        across = CUBE_SIZE / 2 if action.other is None else CENTRED
+        rests = np.hypot(*off[:2]) <= across and off[2] <= SEATED
         if rests and stopped:
             return GRIPPER_MAX
         return width if width <= was or rests else was
