@@ -421,13 +421,12 @@ class LearnedSkills(LeafSystem):
         cube), or to open while the place's cube is in the fingers (its centre within
         ``SEATED`` + half a cube of the grasp frame) and not resting on its target (further
         across than ``CENTRED`` for a stack or half a cube for a put-down, or more than
-        ``SEATED`` above it),
-        is held at the fingers' present command. The classical layer closes only at the
-        grasp pose and opens only at the place pose; from a home pose 2 cm above the top
-        of a ten-cube tower, a skill closed its fingers on air at its first period and
-        then sat over the cube as if it held it (ten cubes in tall towers), and a skill
-        carrying a cube across the table opened 15 cm short of its target and dropped it
-        beside another tower (eight cubes in tall towers).
+        ``SEATED`` above it), is held at the fingers' present command. The classical layer
+        closes only at the grasp pose and opens only at the place pose; from a home pose
+        2 cm above the top of a ten-cube tower, a skill closed its fingers on air at its
+        first period and then sat over the cube as if it held it (ten cubes in tall
+        towers), and a skill carrying a cube across the table opened 15 cm short of its
+        target and dropped it beside another tower (eight cubes in tall towers).
 
         Out of the fingers (its centre further than ``SEATED`` + half a cube from the grasp
         frame), a pick's cube is approached with the fingers open, whatever the skill
