@@ -101,7 +101,7 @@ from cake_drake.systems.waypoint_ik import (
     hold_target,
     reference_target,
 )
-from cake_drake.world.facts import STACK_TOL, read_facts
+from cake_drake.world.facts import CENTRED, read_facts
 from cake_drake.world.scene import CUBE_SIZE
 
 #: m below the transit height the grasp frame may be when a pick or a place counts as done.
@@ -141,10 +141,6 @@ REACH = 0.08
 #: (and over its support's top); a decision to open elsewhere is held
 #: (:meth:`LearnedSkills._gripper`).
 SEATED = 0.01
-#: m: a stack's cube is let go only this close across to centred over its support, as
-#: its demonstrator sets down again a goal's stacked cube further off (``LOOSE`` in
-#: :mod:`cake_drake.learning.policies.expert`); a put-down's anywhere within half a cube.
-CENTRED = 0.8 * STACK_TOL
 #: m: fingers this much wider than a cube have let go of it.
 RELEASED = 0.004
 

@@ -18,6 +18,10 @@ from cake_drake.world.scene import CUBE_SIZE
 
 HEIGHT_TOL = 0.006  # m: how far a resting cube's centre may be from its nominal height
 STACK_TOL = 0.005  # m: a goal's stacked cube must stand within this of the one below (xy)
+#: m: a stacked cube farther than this off the one below is set down again by the closed-loop
+#: expert (:mod:`cake_drake.learning.policies.expert`), and is not let go by a learned skill
+#: (:meth:`cake_drake.systems.skills.LearnedSkills._gripper`): within the verdict's tolerance.
+CENTRED = 0.8 * STACK_TOL
 TILT_TOL = 0.1  # rad: a cube tilted more than this does not rest flat
 
 

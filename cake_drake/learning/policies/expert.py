@@ -95,7 +95,7 @@ from cake_drake.symbolic import (
 from cake_drake.symbolic.grounding import apply_action
 from cake_drake.symbolic.kernels import kernels, latest_kernel
 from cake_drake.symbolic.roles import PICK, PLACE, blocksworld_roles, blocksworld_view
-from cake_drake.world.facts import STACK_TOL, lost_cubes, read_facts, stack_offsets
+from cake_drake.world.facts import CENTRED, lost_cubes, read_facts, stack_offsets
 from cake_drake.world.scene import CUBE_SIZE
 
 #: s a world that does not read as facts (a cube falling, rolling or tilted) is waited for.
@@ -121,8 +121,6 @@ STILL = 0.001
 GRIP_WAIT_S = 0.5
 #: Replans, repeated actions and dropped motions an episode may take before it gives up.
 MAX_REPAIRS = 20
-#: m: a goal's stacked cube farther than this off the one below is set down again.
-LOOSE = 0.8 * STACK_TOL
 #: Speed limits' scale at 10 Hz: a 10 Hz step then moves the hand less than ``EE_STEP``.
 SLOW_AT_10HZ = 0.35
 
@@ -465,7 +463,7 @@ class ClosedLoopExpert:
         """The goal's ``on`` facts measured true with the upper cube farther off the lower
         than the success test allows (four fifths of it, for a margin), lowest first."""
         offsets = stack_offsets(cubes, canonical)
-        loose = [f for f in self.goal & canonical if f[0] == "on" and offsets[f[1]] > LOOSE]
+        loose = [f for f in self.goal & canonical if f[0] == "on" and offsets[f[1]] > CENTRED]
         return sorted(loose, key=lambda f: cubes[f[1]].translation()[2])
 
     def _re_place(self, fact: tuple, canonical) -> tuple[GroundAction, ...]:
