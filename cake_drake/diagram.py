@@ -40,6 +40,7 @@ from cake_drake.geometric.ik import Kinematics, make_solver
 from cake_drake.geometric.planners import make_planner
 from cake_drake.geometric.solve import Planning, TimedSolver
 from cake_drake.paths import portable_path, resolve_path
+from cake_drake.perception.estimator import CubeEstimator
 from cake_drake.plugins import PluginError, is_plugin
 from cake_drake.scenario import Policy, Recorded, Scenario
 from cake_drake.symbolic import GroundAction, Problem
@@ -50,7 +51,14 @@ from cake_drake.systems.skills import LearnedSkills
 from cake_drake.systems.waypoint_ik import MotionSettings, WaypointIk, WorldIndices
 from cake_drake.world.cameras import add_cameras
 from cake_drake.world.faults import Knock, Pusher, Slip, SlipFingers
-from cake_drake.world.scene import Q_HOME, X_HAND_GRASP, Scene, add_world, make_control_plant
+from cake_drake.world.scene import (
+    Q_HOME,
+    X_HAND_GRASP,
+    Scene,
+    add_world,
+    cube_colours,
+    make_control_plant,
+)
 
 #: The reference ports that are logged, with the arm's state and the torques.
 LOGGED_REFERENCE_PORTS = ("desired_state", "desired_acceleration", "finger_state", "labels")
@@ -150,6 +158,8 @@ class CakeDiagram:
     loggers: dict[str, VectorLogSink] = field(default_factory=dict)
     ik: TimedSolver | None = None
     cameras: dict = field(default_factory=dict)  # name -> RgbdSensor (cake_drake.world.cameras)
+    #: The perception layer's system (None: the estimator is ``truth``).
+    estimator: System | None = None
 
 
 def _default_planner():
@@ -168,15 +178,19 @@ def _add_reference(
     planner,
     slots: tuple[tuple[float, float], ...],
     cameras: dict,
+    perceived,
     policy=None,
     skill=None,
 ) -> tuple[ReferenceSource, TimedSolver | None]:
-    """The one place that tells a planned reference, a recorded one and a policy apart."""
+    """The one place that tells a planned reference, a recorded one and a policy apart.
+    ``perceived`` is the port every consumer reads the world's poses from (the plant's,
+    or the perception layer's)."""
     ref = scenario.reference
     if isinstance(ref, Policy):
         return _add_policy(
-            builder, scenario, scene, problem, q_start, slots, cameras, policy, len(actions)
-        )
+            builder, scenario, scene, problem, q_start, slots, cameras, policy, len(actions),
+            perceived,
+        )  # fmt: skip
     if isinstance(ref, Recorded):
         replay = ReferenceTrajectory.from_npz(resolve_path(ref.path), ref.differentiate)
         system = builder.AddNamedSystem("reference", replay.make_source())
@@ -197,7 +211,7 @@ def _add_reference(
         geometric, solver = _add_waypoint_ik(
             builder, scenario, scene, indices, q_start, meaning, source.HasInputPort("infeasible")
         )
-    builder.Connect(plant.get_body_poses_output_port(), geometric.GetInputPort("body_poses"))
+    builder.Connect(perceived, geometric.GetInputPort("body_poses"))
     wires = [
         (source.GetOutputPort("action"), geometric.GetInputPort("action")),
         (geometric.GetOutputPort("actions_done"), source.GetInputPort("actions_done")),
@@ -208,7 +222,7 @@ def _add_reference(
             (plant.get_state_output_port(scene.hand), geometric.GetInputPort("hand_state"))
         )
     if source.HasInputPort("body_poses"):
-        wires.append((plant.get_body_poses_output_port(), source.GetInputPort("body_poses")))
+        wires.append((perceived, source.GetInputPort("body_poses")))
     if source.HasInputPort("infeasible"):
         wires.append((geometric.GetOutputPort("infeasible"), source.GetInputPort("infeasible")))
     if source.HasInputPort("hand_state"):
@@ -303,7 +317,9 @@ def _world_indices(scene: Scene, slots) -> WorldIndices:
     )
 
 
-def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, policy, n_actions):
+def _add_policy(
+    builder, scenario, scene, problem, q_start, slots, cameras, policy, n_actions, perceived
+):
     """A policy in place of the action source and WaypointIk (the learned layer's slot);
     its step budget scaled to the plan's ``n_actions`` unless the scenario sets one."""
     from cake_drake.geometric.ik import DlsIk
@@ -355,7 +371,7 @@ def _add_policy(builder, scenario, scene, problem, q_start, slots, cameras, poli
     plant = scene.plant
     builder.Connect(plant.get_state_output_port(scene.arm), source.GetInputPort("arm_state"))
     builder.Connect(plant.get_state_output_port(scene.hand), source.GetInputPort("hand_state"))
-    builder.Connect(plant.get_body_poses_output_port(), source.GetInputPort("body_poses"))
+    builder.Connect(perceived, source.GetInputPort("body_poses"))
     for name, sensor in cameras.items():
         builder.Connect(sensor.color_image_output_port(), source.GetInputPort(f"image_{name}"))
     return ReferenceSource(source, (), policy=source), None
@@ -399,6 +415,12 @@ def build_diagram(
 
     slots = tuple(scenario.world.slots if slots is None else slots)
     cameras = add_cameras(builder, scene, scenario.cameras) if scenario.cameras else {}
+    estimator = _add_perception(builder, scenario, scene)
+    perceived = (
+        plant.get_body_poses_output_port()
+        if estimator is None
+        else estimator.GetOutputPort("body_poses")
+    )
     reference, solver = _add_reference(
         builder,
         scenario,
@@ -409,9 +431,16 @@ def build_diagram(
         planner or _default_planner(),
         slots,
         cameras,
+        perceived,
         policy,
         skill,
     )
+    if estimator is not None and reference.action_source is not None:
+        if reference.action_source.HasInputPort("cube_estimates"):
+            builder.Connect(
+                estimator.GetOutputPort("cube_estimates"),
+                reference.action_source.GetInputPort("cube_estimates"),
+            )
     finger_command = reference.port("finger_state")
     slips = [f.action for f in faults if isinstance(f, Slip)]
     if slips:
@@ -450,6 +479,11 @@ def build_diagram(
     }
     for name in LOGGED_REFERENCE_PORTS:
         loggers[name] = LogVectorOutput(reference.port(name), builder, dt)
+    if estimator is not None:  # the truth the estimates are measured against, afterwards
+        for name, instance in scene.cubes.items():
+            loggers[f"truth_{name}"] = LogVectorOutput(
+                plant.get_state_output_port(instance), builder, dt
+            )
     for name, logger in loggers.items():
         logger.set_name(f"log_{name}")
     if meshcat is not None:
@@ -460,4 +494,38 @@ def build_diagram(
     diagram.set_name("cake_drake")
     if reference.geometric is not None and reference.geometric.checker is not None:
         reference.geometric.checker.bind(diagram)
-    return CakeDiagram(diagram, scene, scenario, reference, controller, loggers, solver, cameras)
+    return CakeDiagram(
+        diagram, scene, scenario, reference, controller, loggers, solver, cameras, estimator
+    )
+
+
+def _add_perception(builder: DiagramBuilder, scenario: Scenario, scene: Scene):
+    """The perception layer: None for ``truth`` (the plant's own port is read), else a
+    ``CubeEstimator`` on its own cameras, fed the robot's measured joints."""
+    perception = scenario.perception
+    if perception.estimator == "truth":
+        return None
+    plant = scene.plant
+    views = perception.views()
+    sensors = add_cameras(builder, scene, views, prefix="perception_camera_")
+    oracle = perception.estimator == "oracle"
+    cubes = {n: int(scene.cube_body(n).index()) for n in scene.cubes}
+    colours = {n: rgb for n, (_, rgb) in cube_colours(list(scene.cubes)).items()}
+    estimator = builder.AddNamedSystem(
+        "perception",
+        CubeEstimator(
+            plant, scene.arm, scene.hand, cubes, colours, views, perception.noise,
+            scenario.seed, perception.rate_hz, labels=cubes if oracle else None,
+        ),
+    )  # fmt: skip
+    builder.Connect(plant.get_state_output_port(scene.arm), estimator.GetInputPort("arm_state"))
+    builder.Connect(plant.get_state_output_port(scene.hand), estimator.GetInputPort("hand_state"))
+    for camera in views:
+        sensor = sensors[camera.name]
+        image = sensor.label_image_output_port() if oracle else sensor.color_image_output_port()
+        kind = "label" if oracle else "color"
+        builder.Connect(image, estimator.GetInputPort(f"{kind}_{camera.name}"))
+        builder.Connect(
+            sensor.depth_image_32F_output_port(), estimator.GetInputPort(f"depth_{camera.name}")
+        )
+    return estimator

@@ -19,6 +19,7 @@ from pydrake.systems.analysis import Simulator
 
 from cake_drake.diagram import CakeDiagram
 from cake_drake.errors import CakeDrakeError
+from cake_drake.perception.report import errors, summarize
 from cake_drake.plugins import budget, is_plugin, raised_in_simulation
 from cake_drake.world.cameras import grab
 from cake_drake.world.facts import Reading, read_facts, stack_offsets
@@ -92,6 +93,10 @@ class Execution:
     ended: str | None = None
     monitoring: dict = field(default_factory=dict)  # the monitor's events, replans, checks
     frames: dict = field(default_factory=dict)  # each camera's last image (name -> array)
+    #: The perception layer's record (empty for ``truth``): ``summary`` (summary.json's
+    #: ``perception`` figures), ``rows`` (each estimate's errors), ``image`` (the first
+    #: perception camera's last colour image), ``outlines`` (its estimated cubes there).
+    perception: dict = field(default_factory=dict)
 
     @property
     def rtf(self) -> float:
@@ -272,4 +277,43 @@ def execute(
         ended=getattr(cake.reference.policy, "ended", None),
         monitoring=cake.reference.monitoring(context),
         frames=grab(cake.cameras, cake.scenario.cameras, context) if cake.cameras else {},
+        perception=_perception_record(cake, context),
     )
+
+
+def _perception_record(cake: CakeDiagram, context) -> dict:
+    """What the estimator saw and how far off it was, against the logged truth."""
+    estimator = cake.estimator
+    if estimator is None:
+        return {}
+    own = estimator.GetMyContextFromRoot(context)
+    final = estimator.estimate(own)  # the last frame (a new one at the end of the run)
+    belief = estimator.belief(own)
+    truth = {}
+    for name in cake.scene.cubes:
+        log = cake.loggers[f"truth_{name}"].FindLog(context)
+        truth[name] = (log.sample_times(), log.data().T)
+    rows = errors(belief.log, truth)
+    p = cake.scenario.perception
+    summary = {
+        "estimator": p.estimator,
+        "cameras": [
+            {
+                "name": c.name,
+                "width": c.width,
+                "height": c.height,
+                "fov_y_deg": c.fov_y_deg,
+                "xyz": list(c.xyz),
+                "attached_to": c.attached_to,
+            }
+            for c in estimator.cameras
+        ],  # fmt: skip
+        "noise": p.noise.model,
+        **summarize(rows, belief.frames, final.unseen()),
+    }
+    first = estimator.cameras[0]
+    sensor = cake.diagram.GetSubsystemByName(f"perception_camera_{first.name}")
+    image = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(context)).data
+    estimates = {n: e.X_WB for n, e in final.cubes.items() if e.X_WB is not None}
+    return {"summary": summary, "rows": rows, "image": np.array(image[:, :, :3]),
+            "camera": first, "estimates": estimates}  # fmt: skip

@@ -23,6 +23,7 @@ from cake_drake.dynamic.controllers import per_joint
 from cake_drake.errors import InputError, NoPlanError
 from cake_drake.execution import Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
+from cake_drake.perception.settings import check_perception
 from cake_drake.plugins import PluginError, is_plugin, load_attribute, resolve
 from cake_drake.scenario import (
     CHECKPOINT_CHECK,
@@ -262,6 +263,7 @@ def check(scenario: Scenario, write: bool = True) -> Checked:
     s = scenario
     _check_numbers(s)
     check_cameras(s.cameras)
+    check_perception(s.perception)
     getattr(s.controller, "check", lambda: None)()
     make_controller(s.controller)
     task = s.task
@@ -407,6 +409,8 @@ def run_outputs(s: Scenario, generated: str | None) -> set[str]:
     if s.outputs.logs:
         names.add("logs.npz")
     names |= {f"camera_{c.name}.png" for c in s.cameras}
+    if s.perception.estimator != "truth":
+        names.add("perception.png")
     return names
 
 

@@ -44,6 +44,7 @@ from cake_drake.errors import InputError
 from cake_drake.geometric.trajectory import Timing
 from cake_drake.geometric.waypoints import WaypointParams
 from cake_drake.paths import PACKAGE, portable_path, resolve_path
+from cake_drake.perception import Perception
 from cake_drake.symbolic import DEFAULT_PLANNER
 from cake_drake.symbolic.learned import PREFIX as LEARNED_AT
 from cake_drake.symbolic.sexpr import read_text
@@ -366,6 +367,8 @@ class Scenario:
     faults: list[FaultConfig] = field(default_factory=list)
     #: Cameras in the world (cake_drake.world.cameras); none by default (no renderer then).
     cameras: list[Camera] = field(default_factory=list)
+    #: Where the cake's knowledge of the cubes comes from (docs/perception.md).
+    perception: Perception = field(default_factory=Perception)
     #: How a policy learns this task (python -m cake_drake.train): the learning tasks' recipe.
     training: Training = field(default_factory=Training)
     seed: int = 0  # IK restarts draw from it; the same seed gives the same run

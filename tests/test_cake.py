@@ -12,6 +12,7 @@ MIXED = {
     "symbolic": {"kind": "learned", "what": "relational network, width 64: here"},
     "geometric": {"kind": "classical", "what": "WaypointIk, Drake IK"},
     "dynamic": {"kind": "learned", "what": "computed torque + learned residual"},
+    "perception": {"kind": "classical", "what": "depth: colour, depth points, ICP"},
 }
 
 
@@ -30,10 +31,12 @@ def _tiers(fig):
 
 
 def test_each_tier_says_its_layer_and_kind_in_words_and_colour():
-    for layers in (MIXED, {n: {**MIXED[n], "kind": "classical"} for n in LAYERS}):
+    truth = {**MIXED, "perception": {"kind": "truth", "what": "the simulator's own poses"}}
+    three = {n: MIXED[n] for n in LAYERS[:3]}  # a summary from before the perception layer
+    for layers in (MIXED, {n: {**MIXED[n], "kind": "classical"} for n in LAYERS}, truth, three):
         tiers = _tiers(cake_figure(layers, "a title"))
-        assert len(tiers) == 3
-        for name, (box, texts) in zip(LAYERS, tiers, strict=True):
+        assert len(tiers) == len(layers)
+        for name, (box, texts) in zip(LAYERS, tiers, strict=False):
             kind = layers[name]["kind"]
             assert f"{name.upper()}  ·  {kind}" in texts, texts
             assert any(layers[name]["what"] in t for t in texts), texts

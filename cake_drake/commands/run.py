@@ -65,6 +65,16 @@ def run_parser() -> argparse.ArgumentParser:
     g.add_argument("--time-limit", type=float, help="task.time_limit: planner limit, s")
     g.add_argument("--ik", help="motion.ik: drake | dls | module:attribute")
     g.add_argument(
+        "--perception",
+        help="perception.estimator: where the cake reads the cubes from: truth (the "
+        "simulator's own poses; default) | depth (the cameras: colour, depth, ICP) | oracle",
+    )
+    g.add_argument(
+        "--depth-noise",
+        action="store_true",
+        help="perception.noise.model: axial (the depth cameras' noise, seeded by --seed)",
+    )
+    g.add_argument(
         "--action-source", help="reference.action_source: monitor | plan | module:attribute"
     )
     g.add_argument(
@@ -163,6 +173,10 @@ def scenario_from_args(args: argparse.Namespace):
         task.time_limit = check_time_limit(args.time_limit)
     if args.ik is not None:
         s.motion.ik = args.ik
+    if args.perception is not None:
+        s.perception.estimator = args.perception
+    if args.depth_noise:
+        s.perception.noise.model = "axial"
     if args.reference is not None:
         previous = s.reference
         s.reference = Recorded(portable_path(args.reference))

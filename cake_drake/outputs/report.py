@@ -92,7 +92,26 @@ def layers(scenario, plan) -> dict:
             or kind
         )
         dynamic = {"kind": "classical", "what": name}
-    return {"symbolic": symbolic, "geometric": geometric, "dynamic": dynamic}
+    return {
+        "symbolic": symbolic,
+        "geometric": geometric,
+        "dynamic": dynamic,
+        "perception": perception_layer(scenario.perception),
+    }
+
+
+def perception_layer(perception) -> dict:
+    """The cake's base: where its knowledge of the cubes comes from."""
+    if perception.estimator == "truth":
+        return {"kind": "truth", "what": "the simulator's own poses, no camera (truth)"}
+    views = perception.views()
+    cams = ", ".join(f"{c.name} {c.width}x{c.height}" for c in views)
+    how = {
+        "depth": "cubes found by colour, fitted to depth points (footprint start, ICP)",
+        "oracle": "cubes found by the renderer's labels (ground truth), fitted to depth points",
+    }[perception.estimator]
+    noise = ", depth noise" if perception.noise.model != "off" else ""
+    return {"kind": "classical", "what": f"{perception.estimator}: {how}; cameras {cams}{noise}"}
 
 
 def cake_title(problem, cake) -> str:
@@ -129,6 +148,7 @@ def summary(result) -> dict:
             "gains": _gains(controller),
         },
         "layers": layers(scenario, result.plan),
+        "perception": execution.perception.get("summary") or {"estimator": "truth"},
         "ik": scenario.motion.ik if cake.ik is not None else None,
         "reference": getattr(scenario.reference, "path", None),
         "scenario": "scenario.yaml",
@@ -287,6 +307,10 @@ def write_outputs(
             np.savez_compressed(out.path("logs.npz"), **arrays)
     except (OSError, InputError) as e:
         raise OutputError(f"{out.out}: cannot write the outputs ({e})") from None
+    if execution.perception:
+        from cake_drake.outputs.perception import write_perception_figure
+
+        write_perception_figure(execution.perception, out.path("perception.png"))
     for name, image in execution.frames.items():
         from cake_drake.world.render import save_png
 

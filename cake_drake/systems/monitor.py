@@ -12,6 +12,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, LeafSystem
 
 from cake_drake.errors import CakeDrakeError
+from cake_drake.perception.estimator import Estimates
 from cake_drake.symbolic import GroundAction, Plan, Problem, fact_str, validate_plan
 from cake_drake.symbolic.grounding import apply_action, ground_all
 from cake_drake.symbolic.kernels import kernels, latest_kernel
@@ -86,6 +87,7 @@ class ExecutionMonitor(LeafSystem):
         - body_poses
         - hand_state
         - infeasible
+        - cube_estimates
         output_ports:
         - action
 
@@ -96,7 +98,10 @@ class ExecutionMonitor(LeafSystem):
     not taken as finished. ``infeasible`` (optional) is the geometric layer's
     :class:`Refusal` of an action it cannot do where the world is now: that action is
     forbidden in that state and the rest replanned around it (TAMP at its simplest: the
-    plan hears of geometry before the arm moves). At most ``max_replans`` replans; an
+    plan hears of geometry before the arm moves). ``cube_estimates`` (optional) is the
+    perception layer's: a cube that no camera sees and none carries is unknown, and the
+    run stops naming it ("cube c not seen by any camera since 4.2 s") rather than plan
+    from a guess. At most ``max_replans`` replans; an
     unrecoverable world (a cube off the table, the budget spent, no plan from the measured
     facts) stops the run with :meth:`error` naming the fact.
     """
@@ -132,6 +137,9 @@ class ExecutionMonitor(LeafSystem):
         self._hand_port = self.DeclareVectorInputPort("hand_state", BasicVector(4))
         self._refusal_port = self.DeclareAbstractInputPort(
             "infeasible", AbstractValue.Make(Refusal())
+        )
+        self._estimates_port = self.DeclareAbstractInputPort(
+            "cube_estimates", AbstractValue.Make(Estimates(0.0, {}))
         )
         initial = MonitorState(tuple(actions))
         self._state = self.DeclareAbstractState(AbstractValue.Make(initial))
@@ -192,6 +200,11 @@ class ExecutionMonitor(LeafSystem):
         if s.error is not None or s.seen == done:
             return
         t = context.get_time()
+        if self._estimates_port.HasValue(context):
+            unseen = self._estimates_port.Eval(context).unseen()
+            if unseen:
+                self._set(state, replace(s, error=f"the world cannot be recovered: {unseen[0]}"))
+                return
         facts, lost, unread = self.measured_facts(context)
         if lost:
             self._set(state, replace(s, error=f"the world cannot be recovered: {lost[0]}"))

@@ -93,11 +93,11 @@ def camera_pose(camera: Camera) -> RigidTransform:
     return RigidTransform(RollPitchYaw(np.radians(camera.rpy_deg)), camera.xyz)
 
 
-def check_cameras(cameras: Sequence[Camera]) -> None:
+def check_cameras(cameras: Sequence[Camera], section: str = "cameras") -> None:
     """Refuse cameras that cannot work, before anything is built (one line, exit 2)."""
     names = [c.name for c in cameras]
     for c in cameras:
-        where = f"cameras[{names.index(c.name)}] ({c.name})"
+        where = f"{section}[{names.index(c.name)}] ({c.name})"
         if not c.name or not c.name.replace("_", "").isalnum():
             raise InputError(f"{where}: a camera's name is letters, digits and _")
         if names.count(c.name) > 1:
@@ -131,8 +131,11 @@ def render_engine():
     return MakeRenderEngineVtk(RenderEngineVtkParams())
 
 
-def add_cameras(builder: DiagramBuilder, scene, cameras: Sequence[Camera]) -> dict:
-    """Add the VTK renderer and one ``RgbdSensor`` per camera; returns name -> sensor."""
+def add_cameras(
+    builder: DiagramBuilder, scene, cameras: Sequence[Camera], prefix: str = "camera_"
+) -> dict:
+    """Add the VTK renderer and one ``RgbdSensor`` per camera, named ``prefix`` + its
+    name; returns name -> sensor."""
     if not cameras:
         return {}
     sg, plant = scene.scene_graph, scene.plant
@@ -160,7 +163,7 @@ def add_cameras(builder: DiagramBuilder, scene, cameras: Sequence[Camera]) -> di
             RigidTransform(),
         )
         sensor = builder.AddNamedSystem(
-            f"camera_{c.name}",
+            f"{prefix}{c.name}",
             RgbdSensor(
                 parent,
                 camera_pose(c),
