@@ -1,11 +1,14 @@
 """Recovery from random faults, with and without the execution monitor: the recovery sweep.
 
     python benchmarks/recovery.py [--workers N | --ray [ADDRESS]] [--out DIR]
+                                  [--perception depth [--depth-noise]]
 
 Runs ``models/sweeps/recovery.yaml`` (50 random faults, ``RandomFault`` drawn from each
 run's seed, on problem_5 and on a generated six-block problem, closed loop and open
 loop) on the sweep engine, then prints, per problem and loop, how often the goal was
 reached, the mean extra simulated time over the fault-free run, and the mean replans.
+``--perception depth`` runs the same sweep with the cake reading the cubes from the
+cameras (docs/perception.md), ``--depth-noise`` with the depth noise model.
 """
 
 from __future__ import annotations
@@ -39,9 +42,15 @@ def main() -> int:
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--ray", nargs="?", const="", default=None, help="local Ray, or ADDRESS")
     p.add_argument("--out", type=Path, default=None, help="keep the sweep's folder here")
+    p.add_argument("--perception", default="truth", help="perception.estimator (default truth)")
+    p.add_argument("--depth-noise", action="store_true", help="perception.noise.model: axial")
     args = p.parse_args()
     print(machine())
     sweep = load_sweep(SWEEP)
+    sweep.base.perception.estimator = args.perception
+    if args.depth_noise:
+        sweep.base.perception.noise.model = "axial"
+    print(f"perception: {args.perception}{', depth noise' if args.depth_noise else ''}")
     engine = RayCluster(args.ray or None) if args.ray is not None else LocalPool(args.workers)
     with tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp) / "recovery"

@@ -1,5 +1,5 @@
-"""Whole-process wall time of `python -m cake_drake.run`, per mode, with a stage breakdown,
-then the same runs side by side with the two peers.
+"""Whole-process wall time of `python -m cake_drake.run`, per mode (and the torque run from
+the cameras), with a stage breakdown, then the same runs side by side with the two peers.
 
     python benchmarks/run.py [--repeats N] [--problem P] [--rounds R] [--peers DIR] [--busy]
 
@@ -124,6 +124,9 @@ def measure(args) -> None:
     print(" | ".join("---" for _ in head))
     replay = None
     rows = [("position", []), ("torque", []), ("torque replay", None)]
+    # The same torque run from the cameras (docs/perception.md): the perception layer's cost.
+    rows += [("torque, depth", ["--perception", "depth"]),
+             ("torque, depth+noise", ["--perception", "depth", "--depth-noise"])]  # fmt: skip
     if importlib.util.find_spec("lerobot") is not None and not args.problem:
         # The learned layers' shipped runs (the lerobot extra): a state policy in the slot,
         # the learned skills under the planner.
@@ -147,7 +150,7 @@ def measure(args) -> None:
                 capture_output=True,
             )
             extra = ["--reference", str(Path(replay) / "trajectory.npz")]
-        run_args = ["--mode", mode.split()[0]]
+        run_args = ["--mode", mode.split()[0].rstrip(",")]
         if mode in LEARNED:
             run_args = ["--scenario", str(LEARNING), "--name", mode]
         runs = [one_run(run_args, args.problem, extra) for _ in range(args.repeats)]

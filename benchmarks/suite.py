@@ -2,6 +2,7 @@
 
     python benchmarks/suite.py [--sizes 3 12] [--seeds 3] [--mode torque|position]
                                [--time-limit S] [--jobs 1] [--json FILE] [--skills FOLDER]
+                               [--perception depth|depth+noise]
 
 The problems are :func:`cake_drake.symbolic.blocksworld.suite_problems`: per size, seed
 0 is random towers to random towers in the exercise's naming with a complete goal, seed
@@ -18,7 +19,9 @@ compete for the cores).
 ``--skills FOLDER`` runs the same problems with learned skills as the geometric layer
 (``motion.skills``, e.g. ``package://cake_drake/policies/skills``) under the same
 planner, the monitor setting a stacked cube down again when it stands off the one below
-(``re_place``, as the shipped ``learned_tower5``).
+(``re_place``, as the shipped ``learned_tower5``). ``--perception depth`` (or
+``depth+noise``) runs them with the cake reading the cubes from the cameras
+(docs/perception.md).
 
 Columns: blocks, seed, naming, planner (the one that answered), plan length, planning
 s, simulated s, wall s (whole process), success, largest xy offset of a stacked cube
@@ -44,7 +47,9 @@ COLUMNS = (
 )  # fmt: skip
 
 
-def run_one(name: str, mode: str, time_limit: float | None, skills: str = "") -> dict:
+def run_one(
+    name: str, mode: str, time_limit: float | None, skills: str = "", perception: str = ""
+) -> dict:
     """Run one suite problem in this process and return its row (the worker's job)."""
     from cake_drake.pipeline import run
     from cake_drake.scenario import Planned, Scenario, controller_for_mode
@@ -62,6 +67,9 @@ def run_one(name: str, mode: str, time_limit: float | None, skills: str = "") ->
         if skills:
             s.motion.skills = skills
             s.reference = Planned(re_place=True)
+        if perception:  # "depth" or "depth+noise": from the cameras (docs/perception.md)
+            s.perception.estimator = perception.split("+")[0]
+            s.perception.noise.model = "axial" if perception.endswith("+noise") else "off"
         result = run(s, write=False)
     execution = result.execution
     return {
@@ -75,9 +83,13 @@ def run_one(name: str, mode: str, time_limit: float | None, skills: str = "") ->
     }
 
 
-def spawn(name: str, mode: str, time_limit: float | None, skills: str = "") -> dict:
+def spawn(
+    name: str, mode: str, time_limit: float | None, skills: str = "", perception: str = ""
+) -> dict:
     """One problem in a fresh process; its row, with the whole process's wall time."""
     cmd = [sys.executable, __file__, "--one", name, "--mode", mode]
+    if perception:
+        cmd += ["--perception", perception]
     if time_limit is not None:
         cmd += ["--time-limit", str(time_limit)]
     if skills:
@@ -105,10 +117,14 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=1)
     parser.add_argument("--json", type=Path, help="also write the rows here")
     parser.add_argument("--skills", default="", help="learned skills' folder (default: classical)")
+    parser.add_argument(
+        "--perception", default="", help="depth | depth+noise: the cubes from the cameras"
+    )
     parser.add_argument("--one", help=argparse.SUPPRESS)  # worker: run one problem
     args = parser.parse_args()
     if args.one:
-        print(json.dumps(run_one(args.one, args.mode, args.time_limit, args.skills)))
+        row = run_one(args.one, args.mode, args.time_limit, args.skills, args.perception)
+        print(json.dumps(row))
         return
 
     from cake_drake.symbolic.blocksworld import suite_problems
@@ -117,7 +133,9 @@ def main() -> None:
     problems = suite_problems(range(lo, hi + 1), range(args.seeds))
     print(machine())
     layer = f"skills {args.skills}" if args.skills else "classical geometric layer"
-    print(f"mode {args.mode}, planner auto, {layer}, {len(problems)} problems, one process each")
+    seen = f", perception {args.perception}" if args.perception else ""
+    print(f"mode {args.mode}, planner auto, {layer}{seen}, {len(problems)} problems, one "
+          "process each")  # fmt: skip
     print(" | ".join(COLUMNS))
     print(" | ".join("---" for _ in COLUMNS))
     rows = []
@@ -125,7 +143,8 @@ def main() -> None:
     def job(p):
         name, naming, _ = p
         n, seed = (int(x) for x in name.rsplit("-", 2)[1:])
-        return n, seed, naming.name, spawn(name, args.mode, args.time_limit, args.skills)
+        row = spawn(name, args.mode, args.time_limit, args.skills, args.perception)
+        return n, seed, naming.name, row
 
     with ThreadPoolExecutor(max_workers=max(1, args.jobs)) as pool:
         for n, seed, naming, row in pool.map(job, problems):

@@ -422,7 +422,8 @@ def test_a_run_with_the_learned_top_replans_after_a_fault_and_draws_its_cake(tmp
     assert "relational network" in summary["layers"]["symbolic"]["what"]
     assert summary["layers"]["geometric"]["kind"] == "classical"
     assert "symbolic learned (learned, relational network" in r.stderr
-    # The picture says it too: the top tier in the learned colour, the others classical.
+    # The picture says it too: the top tier in the learned colour, the others classical,
+    # on the simulator's truth.
     from matplotlib.colors import to_rgb
     from matplotlib.image import imread
 
@@ -435,7 +436,7 @@ def test_a_run_with_the_learned_top_replans_after_a_fault_and_draws_its_cake(tmp
     for name, box in zip(LAYERS, boxes, strict=True):
         px, py = ax.transData.transform((box.get_x() + box.get_width() - 0.4, box.get_y() + 0.15))
         colour = image[int(image.shape[0] - py), int(px)]
-        kind = "learned" if name == "symbolic" else "classical"
+        kind = {"symbolic": "learned", "perception": "truth"}.get(name, "classical")
         assert np.allclose(colour, to_rgb(COLOURS[kind]), atol=0.02), name
 
 

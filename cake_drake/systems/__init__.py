@@ -59,9 +59,10 @@ def make_action_source(spec: str, context: SourceContext) -> LeafSystem:
     Protocol of what a factory returns: a System with a vector input ``actions_done``
     (size 1) and an abstract output ``action`` holding an :class:`ActionCommand` (index =
     actions done; ``action=None`` with that index once it has nothing more to do). It may
-    also have the abstract input ``body_poses`` (the plant's body poses) and the vector
-    input ``hand_state`` (the fingers' positions and velocities), which are then
-    connected, and the methods ``error(context)`` (why it stopped, or None) and
+    also have the abstract input ``body_poses`` (the world's body poses: the plant's, or
+    the perception layer's estimate), ``cube_estimates`` (the perception layer's, when it
+    has one) and the vector input ``hand_state`` (the fingers' positions and velocities),
+    which are then connected, and the methods ``error(context)`` (why it stopped, or None) and
     ``executed(context)`` (the actions it gave, in order).
     """
     factory = resolve(spec, ACTION_SOURCES, "action source")
