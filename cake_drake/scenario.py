@@ -691,6 +691,9 @@ def dump_scenario(scenario: Scenario) -> str:
         "#   python -m cake_drake.run --scenario scenario.yaml --out OTHER_FOLDER\n"
         f"# Recorded with: {versions}\n"
     )
+    if scenario.perception.estimator != "truth" and not scenario.perception.cameras:
+        scenario = _copy(scenario)  # the cameras it used, written out (not "the defaults")
+        scenario.perception.cameras = scenario.perception.views()
     return header + yaml_dump_typed(scenario)
 
 

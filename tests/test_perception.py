@@ -304,3 +304,15 @@ def test_segmentation_finds_a_cube_by_chromaticity_in_light_and_shade():
     labels = segment(image, colours)
     assert (labels[1:5, 1:3] == 0).all() and (labels[1:3, 5:7] == 2).all()
     assert (labels == 1).sum() == 0 and labels[0, 0] == -1 and labels[5, 7] == -1
+
+
+def test_a_runs_scenario_yaml_writes_out_the_cameras_it_used():
+    from cake_drake.perception.settings import default_cameras
+    from cake_drake.scenario import dump_scenario, parse_scenario
+
+    s = Scenario()
+    s.perception.estimator = "depth"
+    again = parse_scenario(dump_scenario(s), "scenario.yaml")
+    assert [c.name for c in again.perception.views()] == [c.name for c in default_cameras()]
+    assert again.perception.cameras and not s.perception.cameras  # the caller's is untouched
+    assert not parse_scenario(dump_scenario(Scenario()), "s.yaml").perception.cameras  # truth

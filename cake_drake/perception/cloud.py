@@ -88,7 +88,9 @@ def segment(rgb: np.ndarray, colours: Sequence[Sequence[float]]) -> np.ndarray:
     Colour and depth come from one camera at one size, each pixel one ray, so a pixel on
     a cube's outline is the cube's in both images: none is dropped."""
     img = np.asarray(rgb[..., :3])
-    hi, lo = img.max(axis=-1).astype(np.int16), img.min(axis=-1).astype(np.int16)
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]  # channel by channel: faster than axis=-1
+    hi = np.maximum(np.maximum(r, g), b).astype(np.int16)
+    lo = np.minimum(np.minimum(r, g), b).astype(np.int16)
     lit = (hi >= MIN_VALUE * 255) & ((hi - lo) >= MIN_SATURATION * hi)
     rows, cols = np.nonzero(lit)
     labels = np.full(lit.shape, -1, np.int32)

@@ -30,9 +30,9 @@ class DepthNoise:
 
 def default_cameras() -> list[Camera]:
     """Three depth cameras outside the arc of table slots, looking in at the robot: one
-    in front, one at each front corner of the table. Each cube of a ten-high tower on any
-    slot is seen by at least two (the robot stands behind the cubes, not before them);
-    320 x 240 keeps a frame of all three at about 40 ms on one core."""
+    in front, one at each front corner of the table. Every cube of a ten-high tower on
+    any slot shows to at least two of them (the robot stands behind the cubes, not in
+    front of them)."""
     target = [0.3, 0.0, 0.12]
     common = {"target": target, "width": 320, "height": 240, "fov_y_deg": 50.0, "depth": True}
     return [
