@@ -11,6 +11,7 @@ imports nothing of the project's but its errors.
 
 from __future__ import annotations
 
+import posixpath
 from pathlib import Path
 
 from cake_drake.errors import InputError
@@ -26,7 +27,13 @@ def resolve_path(path: str, base: Path | None = None) -> Path:
     """A path as a file system path: ``package://cake_drake/`` is ``models/``; a relative
     path is taken from ``base`` (a scenario file's folder) where one is given."""
     if path.startswith(PACKAGE):
-        return MODELS_DIR / path[len(PACKAGE) :]
+        inside = posixpath.normpath(path[len(PACKAGE) :] or ".")
+        if inside == ".." or inside.startswith(("../", "/")) or "\x00" in inside:
+            raise InputError(
+                f"{path!r}: a package URL names a file under models/ "
+                "(package://cake_drake/FILE, no '..' out of it); refused unread"
+            )
+        return MODELS_DIR / inside
     if path.startswith("package://"):
         raise InputError(f"{path}: only package://cake_drake/... is known (the models/ folder)")
     p = Path(path).expanduser()

@@ -32,6 +32,24 @@ def test_a_package_path_is_written_as_given_not_joined_to_the_working_folder(tmp
     assert portable_path(tmp_path) == str(tmp_path.resolve())
 
 
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("task.problem", "package://cake_drake/../../../etc/passwd"),
+        ("task.problem", "package://cake_drake/pddl/../../../../etc/passwd"),
+        ("motion.skills", "package://cake_drake/../../../etc"),
+    ],
+)
+def test_a_package_url_out_of_models_is_refused_unread(tmp_path, field, value):
+    section, name = field.split(".")
+    path = tmp_path / "s.yaml"
+    path.write_text(f"{section}: {{{name}: '{value}'}}\n")
+    r = _cli("cake_drake.run", "--scenario", str(path), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "refused unread" in r.stderr, r.stderr
+    assert "root:" not in r.stderr  # nothing of the file is quoted back
+
+
 def test_skills_beside_a_whole_task_policy_are_refused_in_one_line(tmp_path):
     path = tmp_path / "s.yaml"
     path.write_text(
