@@ -286,8 +286,13 @@ def test_settling_sets_a_hidden_topped_cube_on_its_support_and_leaves_a_held_one
         "mid": Fit(X(0.5, 3 * h - 0.002), 300, 0.0, top=0),  # on it, 2 mm low
         "top": Fit(X(0.5, 5 * h + 0.0004), 300, 0.0, top=120),  # its top seen: measured
         "held": Fit(X(0.2, 0.15), 80, 0.0, top=0),  # in the air: rests on nothing
+        "noisy": Fit(RigidTransform(RollPitchYaw(0.03, 0, 0.4), [-0.3, 0, h]), 90, 0.0, top=50),
+        "fallen": Fit(RigidTransform(RollPitchYaw(0.3, 0, 0.4), [0.3, 0.3, h]), 90, 0.0, top=9),
     }
     out = settle(fits, {})
+    level = RollPitchYaw(out["noisy"].X_WB.rotation()).vector()
+    assert np.allclose(level, [0, 0, 0.4])  # resting, tilted by noise alone: level
+    assert out["fallen"] is fits["fallen"]  # tilted further: as fitted
     assert out["low"].X_WB.translation()[2] == pytest.approx(h)
     assert out["mid"].X_WB.translation()[2] == pytest.approx(3 * h)
     assert out["top"].X_WB.translation()[2] == pytest.approx(5 * h + 0.0004)

@@ -214,31 +214,36 @@ def fit_cube(
 SETTLE_TOL = 0.005
 #: Points on the upward face that make its height a measurement of its own.
 TOP_SEEN = 10
+#: rad: a resting cube fitted tilted less than this is level (half the facts' TILT_TOL).
+LEVEL_TOL = 0.05
 
 
 def settle(fits: dict[str, Fit], others: dict[str, RigidTransform]) -> dict[str, Fit]:
-    """``fits`` with each cube whose top face is hidden (a tower's lower cubes: only
-    their sides show, and a side says little of its height) set down on what it rests
-    on: the table (z = 0), or a cube below it, ``others`` included (estimates carried
-    from earlier frames). Lowest first, so a tower settles from the table up; a cube
-    that rests on nothing within :data:`SETTLE_TOL` (held, falling, tilted) is left."""
+    """``fits`` with each cube that rests on something set on it: the table (z = 0) or
+    a cube below it (``others`` included: estimates carried from earlier frames), within
+    :data:`SETTLE_TOL`. Such a cube is level (its fitted tilt, under :data:`LEVEL_TOL`, is
+    the noise's), and one whose top face is hidden (a tower's lower cubes: only their
+    sides show, and a side says little of its height) takes its height from its support.
+    Lowest first, so a tower settles from the table up; a cube that rests on nothing
+    (held, falling) or tilts further is left as fitted."""
     out = dict(fits)
     placed = {n: X for n, X in others.items() if n not in fits}
     for name in sorted(fits, key=lambda n: fits[n].X_WB.translation()[2]):
         fit = fits[name]
         p = fit.X_WB.translation()
-        if fit.top < TOP_SEEN:
-            bottom = p[2] - HALF
-            supports = [0.0] + [
-                X.translation()[2] + HALF
-                for other, X in placed.items()
-                if np.linalg.norm(X.translation()[:2] - p[:2]) < HALF
-                and abs(bottom - X.translation()[2] - HALF) < SETTLE_TOL
-            ]
-            near = [z for z in supports if abs(bottom - z) < SETTLE_TOL]
-            if near:
-                X = RigidTransform(fit.X_WB.rotation(), [p[0], p[1], max(near) + HALF])
-                fit = Fit(X, fit.inliers, fit.rms, fit.top)
-                out[name] = fit
+        R = fit.X_WB.rotation().matrix()
+        bottom = p[2] - HALF
+        supports = [0.0] + [
+            X.translation()[2] + HALF
+            for other, X in placed.items()
+            if np.linalg.norm(X.translation()[:2] - p[:2]) < HALF
+        ]
+        near = [z for z in supports if abs(bottom - z) < SETTLE_TOL]
+        tilt = math.acos(float(np.clip(R[2, 2], -1.0, 1.0)))
+        if near and tilt < LEVEL_TOL:
+            z = max(near) + HALF if fit.top < TOP_SEEN else p[2]
+            level = RotationMatrix(_yaw_R(math.atan2(R[1, 0], R[0, 0])))
+            fit = Fit(RigidTransform(level, [p[0], p[1], z]), fit.inliers, fit.rms, fit.top)
+            out[name] = fit
         placed[name] = fit.X_WB
     return out
