@@ -24,6 +24,10 @@ INLIER_TOL = 0.003
 #: A cube is seen when at least this many of its points are inliers.
 MIN_INLIERS = 20
 ICP_ITERATIONS = 30
+#: The ICP step's damping, per point, and its largest move (m): the fixed point is the
+#: undamped one, only the way there is shorter-stepped.
+DAMPING = 1e-3
+MAX_STEP = 0.01
 #: m: how far from the median of a cube's points a point of the cube can be (the centre
 #: to a corner is 3.5 cm; the median may sit a centimetre off the centre).
 REACH = 0.05
@@ -87,7 +91,11 @@ def icp(
         if use.sum() < 6:
             break
         J = np.hstack([n[use], np.cross(p[use], n[use])])
-        x, *_ = np.linalg.lstsq(J, r[use], rcond=None)
+        # Damped (a side-only view leaves the height nearly free: an undamped step there
+        # can leave the cube), the damping a metre and a radian of a cube's size apart.
+        H = J.T @ J + DAMPING * len(J) * np.diag([1.0, 1.0, 1.0, HALF**2, HALF**2, HALF**2])
+        x = np.linalg.solve(H, J.T @ r[use])
+        x[:3] *= min(1.0, MAX_STEP / max(float(np.linalg.norm(x[:3])), 1e-12))
         R = R @ _rotation(x[3:])
         t = t + R @ x[:3]
         if np.linalg.norm(x[:3]) < 1e-7 and np.linalg.norm(x[3:]) < 1e-6:
