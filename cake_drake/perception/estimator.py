@@ -272,7 +272,7 @@ class CubeEstimator(LeafSystem):
                 fit = fit_cube(P, eye, predictions.get(name), self._tol)
                 if fit is not None:
                     fits[name] = fit
-        fits = settle(fits, predictions)
+        fits = settle(fits, {n: X for n, X in predictions.items() if n not in belief.lost})
         for name in self._names:
             last, predicted = belief.last.get(name), predictions.get(name)
             fit = fits.get(name)
