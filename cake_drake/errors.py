@@ -130,6 +130,34 @@ def _terminate(signum, frame) -> None:
     raise KeyboardInterrupt(name)
 
 
+#: How long after an interrupt was dropped it is sent again, and the timers that will.
+REDELIVER_S = 0.05
+_redelivery: list = []
+
+
+def _redeliver_swallowed(previous: Callable) -> Callable:
+    """An ``sys.unraisablehook`` that sends an interrupt again when it landed where Python
+    cannot raise (a weak reference's callback, as the import system's locks have, or a
+    ``__del__``): Python prints it and carries on, and the command ran to its end."""
+
+    def hook(unraisable) -> None:
+        if isinstance(unraisable.exc_value, KeyboardInterrupt) and _signalled:
+            import signal
+            import threading
+
+            # Sent again a moment later, from another thread, so that its handler runs in
+            # the main thread's own code and not in here, where it would be dropped again.
+            again = (os.getpid(), signal.Signals[_signalled[-1]])
+            timer = threading.Timer(REDELIVER_S, os.kill, again)
+            timer.daemon = True
+            _redelivery.append(timer)
+            timer.start()
+            return
+        previous(unraisable)
+
+    return hook
+
+
 def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = None) -> int:
     """Call ``main`` and turn every way it can stop into one line and a documented code.
 
@@ -149,6 +177,8 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
         previous = {}
     _signalled.clear()
     _main_started[:] = [True]
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _redeliver_swallowed(previous_hook)
     given = sys.argv[1:] if argv is None else argv
     show_trace = "--traceback" in given or os.environ.get(TRACEBACK_ENV, "") not in ("", "0")
     try:
@@ -177,6 +207,9 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
             return _interrupted(_signalled[0])
         raise
     finally:
+        sys.unraisablehook = previous_hook
+        while _redelivery:  # the command has stopped: nothing more to send
+            _redelivery.pop().cancel()
         for s, handler in previous.items():
             signal.signal(s, handler)
         if _signalled and _a_command:  # the command ends now: as interrupted, 130

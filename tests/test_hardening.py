@@ -283,6 +283,33 @@ def test_a_signal_mid_run_stops_cleanly_and_keeps_the_old_outputs(tmp_path, sig)
     _no_leftovers(out)
 
 
+def test_an_interrupt_that_lands_where_python_cannot_raise_still_stops_the_command():
+    """A signal whose KeyboardInterrupt is raised inside a weak reference's callback or a
+    ``__del__`` (the import system's locks have such callbacks) is printed and dropped by
+    Python; the command must still stop, as interrupted, not run to its end."""
+    script = (
+        "import os, signal, time\n"
+        "from cake_drake.errors import run_cli\n"
+        "class Dropped:\n"
+        "    def __del__(self):\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "        for _ in range(10**6): pass\n"  # the handler runs in here
+        "def main(argv):\n"
+        "    Dropped()\n"
+        "    end = time.monotonic() + 20\n"
+        "    while time.monotonic() < end: time.sleep(0.01)\n"
+        "    print('ran to its end')\n"
+        "    return 0\n"
+        "raise SystemExit(run_cli(main, []))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, cwd=ROOT, timeout=60
+    )
+    assert proc.returncode == 130, proc.stdout + proc.stderr
+    assert "ran to its end" not in proc.stdout
+    assert proc.stderr.splitlines()[-1] == "error: interrupted; nothing was written", proc.stderr
+
+
 @pytest.mark.slow
 def test_a_goal_about_the_arm_is_judged_from_the_world(tmp_path):
     from cake_drake.pipeline import run
