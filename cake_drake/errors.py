@@ -7,6 +7,7 @@ stderr and the exit code stored on the class.
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 from collections.abc import Callable
@@ -187,7 +188,7 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
         trace = getattr(e, "trace", None)
         if trace and show_trace:  # a plug-in's failure, for its author
             print(trace, end="", file=sys.stderr)
-        print(f"error: {e}", file=sys.stderr)
+        print(f"error: {one_line(str(e))}", file=sys.stderr)
         return e.exit_code
     except KeyboardInterrupt as e:
         return _interrupted(str(e))
@@ -199,6 +200,9 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
     except OSError as e:
         if _signalled:
             return _interrupted(_signalled[0])
+        if e.errno == errno.ENAMETOOLONG:  # a name the user gave, at a door not checked
+            print(f"error: {one_line(shown_path(e.filename or ''))}: {e.strerror}", file=sys.stderr)
+            return EXIT_BAD_INPUT
         where = f"{e.filename}: " if e.filename else ""
         print(f"error: {where}{e.strerror or e}; nothing was written", file=sys.stderr)
         return EXIT_OUTPUT_FAILED
@@ -214,6 +218,22 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
             signal.signal(s, handler)
         if _signalled and _a_command:  # the command ends now: as interrupted, 130
             _ignore_interrupts()
+
+
+#: Control characters as they are written in an error line: a newline or a carriage return
+#: in a path (a file's name may hold one) must not split the line or overwrite it.
+_ESCAPED = {c: f"\\x{c:02x}" for c in (*range(9), *range(11, 32), 127)} | {10: "\\n", 13: "\\r"}
+
+
+def shown_path(path: str) -> str:
+    """``path`` as an error line shows it: a long one cut in the middle."""
+    path = os.fsdecode(path)
+    return path if len(path) <= 60 else f"{path[:40]}...{path[-16:]}"
+
+
+def one_line(message: str) -> str:
+    """``message`` with its control characters escaped, so that it prints as one line."""
+    return message.translate(_ESCAPED)
 
 
 def _reopen_closed_streams() -> None:

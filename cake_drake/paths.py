@@ -11,10 +11,11 @@ imports nothing of the project's but its errors.
 
 from __future__ import annotations
 
+import os
 import posixpath
 from pathlib import Path
 
-from cake_drake.errors import InputError
+from cake_drake.errors import InputError, shown_path
 
 #: The repository folder that holds the scene, the robot, the PDDL files and the shipped
 #: learned layers.
@@ -23,9 +24,29 @@ MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
 PACKAGE = "package://cake_drake/"
 
 
+#: What Linux's file systems hold: a name of 255 bytes, a path of 4,095.
+NAME_MAX = 255
+PATH_MAX = 4095
+
+
+def check_holdable(path: str) -> None:
+    """Refuse, as bad input, a path no file system can hold: the OS's own error for it
+    reads as an output that could not be written, or as a traceback."""
+    if "\x00" in path:
+        raise InputError(f"{path!r}: a path cannot hold a NUL byte")
+    raw = os.fsencode(path)
+    if len(raw) > PATH_MAX or any(len(name) > NAME_MAX for name in raw.split(b"/")):
+        raise InputError(
+            f"{shown_path(path)}: a path of {len(raw):,} bytes is longer than a file system holds "
+            f"({PATH_MAX:,} bytes, {NAME_MAX} a name)"
+        )
+
+
 def resolve_path(path: str, base: Path | None = None) -> Path:
     """A path as a file system path: ``package://cake_drake/`` is ``models/``; a relative
-    path is taken from ``base`` (a scenario file's folder) where one is given."""
+    path is taken from ``base`` (a scenario file's folder) where one is given. A path no
+    file system can hold (a NUL byte, a name or a whole too long) is refused here."""
+    check_holdable(path)
     if path.startswith(PACKAGE):
         inside = posixpath.normpath(path[len(PACKAGE) :] or ".")
         if inside == ".." or inside.startswith(("../", "/")) or "\x00" in inside:

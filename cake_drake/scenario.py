@@ -411,7 +411,11 @@ def resolved(scenario: Scenario, base: Path | None) -> Scenario:
     out = _copy(scenario)
     for section, name, prefix in _scenario_paths(out):
         path = getattr(section, name)[len(prefix) :]
-        setattr(section, name, prefix + portable_path(resolve_path(path, base)))
+        try:
+            setattr(section, name, prefix + portable_path(resolve_path(path, base)))
+        except InputError as e:  # the field it was given in, before the path's fault
+            where = next(f.name for f in dataclasses.fields(out) if getattr(out, f.name) is section)
+            raise InputError(f"{where}.{name}: {e}") from None
     return out
 
 
@@ -637,7 +641,10 @@ def load_scenario(path: str | Path, name: str | None = None) -> Scenario:
     path = Path(path)
     text = read_text(path, "scenario file (*.yaml)", allow_empty=True)
     scenario = parse_scenario(text, str(path), name)
-    return resolved(scenario, path.resolve().parent)
+    try:
+        return resolved(scenario, path.resolve().parent)
+    except InputError as e:
+        raise InputError(f"{path}: {e}") from None
 
 
 def scenario_names(path: str | Path) -> list[str]:

@@ -50,6 +50,40 @@ def test_a_package_url_out_of_models_is_refused_unread(tmp_path, field, value):
     assert "root:" not in r.stderr  # nothing of the file is quoted back
 
 
+@pytest.mark.parametrize(
+    "value, words",
+    [
+        ("a\\0b.pddl", r"task.problem: 'a\x00b.pddl': a path cannot hold a NUL byte"),
+        ("a\\nb.pddl", r"a\nb.pddl: no such PDDL problem file"),
+        ("x" * 5000, "task.problem: xxxx"),
+    ],
+    ids=["nul", "newline", "too-long"],
+)
+def test_a_path_no_file_system_holds_is_bad_input_on_one_line(tmp_path, value, words):
+    path = tmp_path / "s.yaml"
+    path.write_text(f'task: {{problem: "{value}"}}\n')
+    r = _cli("cake_drake.run", "--scenario", str(path), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
+    assert len(r.stderr) < 300, r.stderr  # a long path is cut, not echoed whole
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["cake_drake.plan", "models/pddl/blocksworld.pddl", "y" * 300],
+        ["cake_drake.run", "--problem", "y" * 300, "--out", "o"],
+        ["cake_drake.run", "--out", "y" * 300],
+    ],
+    ids=["plan-problem", "run-problem", "run-out"],
+)
+def test_a_name_too_long_at_any_door_is_bad_input(tmp_path, args):
+    r = _cli(*args)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.startswith("error: yyyy") and r.stderr.count("\n") == 1, r.stderr
+
+
 def test_skills_beside_a_whole_task_policy_are_refused_in_one_line(tmp_path):
     path = tmp_path / "s.yaml"
     path.write_text(
@@ -297,3 +331,30 @@ def test_a_checkpoint_whose_files_disagree_is_one_line_before_anything_runs(
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and words in r.stderr, r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "folder, marker, kind",
+    [
+        ("policies/skills", "skill.json", "relative_skill"),
+        ("policies/skills_rl", "skill_rl.json", "skill_rl"),
+        ("policies/stack2_pixels_rl", "rl.json", "rl"),
+        ("planners/blocks", "planner.json", "planner"),
+    ],
+)
+@pytest.mark.parametrize("bad", [True, 1.0, "1"], ids=["true", "float", "string"])
+def test_a_format_that_is_not_a_whole_number_is_refused(tmp_path, folder, marker, kind, bad):
+    import json
+    import shutil
+
+    from cake_drake import artifacts
+    from cake_drake.errors import InputError
+
+    copy = tmp_path / "copy"
+    shutil.copytree(ROOT / "models" / folder, copy)
+    meta = json.loads((copy / marker).read_text())
+    meta["format"] = bad
+    (copy / marker).write_text(json.dumps(meta))
+    with pytest.raises(InputError, match=f"{marker}: field 'format' is {bad!r}; this version"):
+        needs = {"action_space": "joint_position"} if kind == "rl" else {}
+        artifacts.check(copy, kind, role="the test", **needs)

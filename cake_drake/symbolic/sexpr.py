@@ -12,6 +12,7 @@ from pathlib import Path
 
 from cake_drake.errors import InputError, PddlError
 from cake_drake.formats import MAX_INPUT_BYTES
+from cake_drake.paths import check_holdable
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,7 @@ def read_text(path: str | Path, what: str = "file", allow_empty: bool = False) -
     (NUL bytes or invalid UTF-8) and, unless ``allow_empty``, files with nothing but
     whitespace are refused here. Every file the project reads comes through here.
     """
+    check_holdable(str(path))
     p = Path(path).expanduser()
     if not p.exists():
         raise InputError(f"{path}: no such {what}")
