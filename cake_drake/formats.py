@@ -39,6 +39,18 @@ def read_json_mapping(path: str | Path, what: str) -> dict:
     return data
 
 
+def check_format(meta: dict, path: str | Path, formats: tuple[int, ...]) -> int:
+    """A description's ``format``: one of ``formats``, a whole number (``true`` is not 1,
+    nor ``1.0``); one line naming the file otherwise."""
+    given = meta.get("format")
+    if type(given) is not int or given not in formats:
+        raise InputError(
+            f"{path}: field 'format' is {given!r:.40}; this version reads "
+            f"{' or '.join(map(str, formats))}"
+        )
+    return given
+
+
 #: The largest input file read at all (PDDL, plans, scenarios, checkpoints' descriptions):
 #: anything larger is refused unread.
 MAX_INPUT_BYTES = 16 * 1024 * 1024

@@ -41,7 +41,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from cake_drake.errors import InputError, NoPlanError
-from cake_drake.formats import MAX_INPUT_BYTES, npz_headers, read_npz
+from cake_drake.formats import MAX_INPUT_BYTES, check_format, npz_headers, read_npz
 from cake_drake.paths import MODELS_DIR, portable_path, resolve_path
 from cake_drake.symbolic.diagnose import diagnose
 from cake_drake.symbolic.grounding import check_action, ground_all, relaxed_reachable
@@ -314,10 +314,7 @@ def _check_config(cfg_path: Path, cfg: object) -> dict:
         raise _bad(cfg_path, f"the file holds a {type(cfg).__name__}, not a mapping")
     if cfg.get("kind") != KIND:
         raise _bad(cfg_path, f"field 'kind' is {cfg.get('kind')!r}, expected {KIND!r}")
-    if cfg.get("format") != FORMAT:
-        raise _bad(
-            cfg_path, f"field 'format' is {cfg.get('format')!r}; this version reads {FORMAT}"
-        )
+    check_format(cfg, cfg_path, (FORMAT,))
     arch = cfg.get("architecture")
     if not isinstance(arch, dict):
         raise _bad(cfg_path, "field 'architecture' is missing or not a mapping")

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
-from cake_drake.formats import read_npz
+from cake_drake.formats import check_format, read_npz
 from cake_drake.policy.observations import RELATIVE_SIZE
 
 #: What ``skill.json`` says a folder is.
@@ -214,9 +214,7 @@ def _read_meta(folder: Path) -> dict:
         said = meta.get("kind") if isinstance(meta, dict) else meta
         raise InputError(f"{path}: kind {said!r:.40}; a skill that never sees the arm says "
                          f"kind: {KIND}")  # fmt: skip
-    if meta.get("format") not in FORMATS:
-        raise InputError(f"{path}: format {meta.get('format')!r}; this cake_drake reads "
-                         f"{' or '.join(map(str, FORMATS))}")  # fmt: skip
+    check_format(meta, path, FORMATS)
     if meta.get("input") != INPUT or meta.get("input_size") != RELATIVE_SIZE:
         raise InputError(
             f"{path}: reads {meta.get('input')!r} of {meta.get('input_size')!r} numbers; this "

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
-from cake_drake.formats import read_json_mapping
+from cake_drake.formats import check_format, read_json_mapping
 from cake_drake.geometric.ik import Kinematics
 from cake_drake.learning.policies.lerobot_checkpoint import (
     CheckpointPolicy,
@@ -131,9 +131,7 @@ def read_rl(folder) -> dict:
     folder = Path(folder)
     path = folder / FILE
     info = read_json_mapping(path, "an RL checkpoint's description")
-    if info.get("format") != FORMAT:
-        raise InputError(f"{path}: field 'format' is {info.get('format')!r}; this version "
-                         f"reads {FORMAT}")  # fmt: skip
+    check_format(info, path, (FORMAT,))
     want = {
         "kind": lambda v: v in KIND_LABELS,
         "algorithm": lambda v: v in ALGORITHMS,

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
-from cake_drake.formats import read_json_mapping
+from cake_drake.formats import check_format, read_json_mapping
 from cake_drake.learning.policies import relative_skill
 from cake_drake.learning.policies.rl import ALGORITHMS, CURVE, MODEL, PROGRESS, check_weights
 from cake_drake.policy.observations import RELATIVE_SIZE
@@ -70,9 +70,7 @@ def read(folder: str | Path) -> dict:
     folder = Path(folder)
     path = folder / FILE
     info = read_json_mapping(path, "a skill residual's description")
-    if info.get("format") != FORMAT:
-        raise InputError(f"{path}: field 'format' is {info.get('format')!r}; this version "
-                         f"reads {FORMAT}")  # fmt: skip
+    check_format(info, path, (FORMAT,))
     want = {
         "kind": lambda v: v == KIND,
         "algorithm": lambda v: v in ALGORITHMS,
