@@ -68,7 +68,9 @@ def test_the_same_seed_gives_the_same_start():
     ("kwargs", "words"),
     [
         ({"actions": ["place"]}, "actions = ['place']: the kinds of action an episode may be"),
-        ({"blocks": 1, "actions": "stack"}, "no problem of one cube has a stack"),
+        ({"blocks": 1, "actions": "stack"}, "every problem of one cube holds its goal"),
+        ({"blocks": 1, "actions": "places"}, "every problem of one cube holds its goal"),
+        ({"blocks": (1, 1), "actions": "picks"}, "give 2 blocks or more"),
         ({"budget": 0}, "budget = 0: control periods an action may take"),
         ({"skill": "package://cake_drake/policies/stack2"}, "not a learned skill"),
         ({"reward": {"plce": 1.0}}, "reward.plce: no such reward term"),
@@ -77,6 +79,17 @@ def test_the_same_seed_gives_the_same_start():
 def test_an_environment_that_cannot_start_is_refused_when_made(kwargs, words):
     with pytest.raises(InputError, match=words.replace("[", r"\[").replace("]", r"\]")):
         gymnasium.make(ENV_ID, **kwargs)
+
+
+@pytest.mark.parametrize(
+    "action", [np.full(7, np.nan), np.zeros(3)], ids=["not-finite", "too-short"]
+)
+def test_an_action_outside_the_space_is_the_caller_s_not_the_skill_s(action):
+    env = gymnasium.make(ENV_ID, blocks=(3, 3))
+    env.reset(seed=3)
+    with pytest.raises(InputError, match=r"^CakeDrake/Skill-v0 step\(\): action \[.*; the "
+                       "action space is 7 finite numbers$"):  # fmt: skip
+        env.step(action)
 
 
 def test_its_reward_terms_are_the_stack_env_s_names():

@@ -117,6 +117,14 @@ def _kinds(actions) -> tuple[str, ...]:
     return kinds
 
 
+#: Why a draw gave no start, as the message says it.
+NO_START = {
+    "goal": "held their goal at the start",
+    "kinds": "had no {kinds} action among the plan's first {horizon}",
+    "lead": "where the lead skill {skill} gave the run up before the chosen action",
+}
+
+
 class SkillEnv(gymnasium.Env):
     """See the module's docstring."""
 
@@ -143,10 +151,10 @@ class SkillEnv(gymnasium.Env):
         self.blocks, self.kinds = _blocks(blocks), _kinds(actions)
         if not isinstance(tall, bool):
             raise InputError(f"tall = {tall!r:.40}: true or false")
-        if self.blocks[1] < 2 and set(self.kinds) <= {"stack", "unstack"}:
+        if self.blocks[1] < 2:
             raise InputError(
-                f"actions = {actions!r:.40} with blocks = {blocks!r:.24}: no problem of one "
-                "cube has a stack or an unstack, so no episode could start; give more blocks"
+                f"blocks = {blocks!r:.24}: every problem of one cube holds its goal at its "
+                "start, so no episode could start; give 2 blocks or more"
             )
         whole = isinstance(budget, int | np.integer) and not isinstance(budget, bool)
         if not (whole and 1 <= budget <= 10_000):
@@ -212,21 +220,22 @@ class SkillEnv(gymnasium.Env):
             return np.asarray(o["observation.relative"], np.float32)
         return np.concatenate([o["observation.state"], o["observation.skill"]]).astype(np.float32)
 
-    def _try(self, seed: int) -> bool:
-        """Lead the drawn problem up to its chosen action; False where no start comes."""
+    def _try(self, seed: int) -> str | None:
+        """Lead the drawn problem up to its chosen action; None once there, else why not
+        (one of :data:`NO_START`'s keys)."""
         rng = np.random.default_rng(seed)
         blocks = int(rng.integers(self.blocks[0], self.blocks[1] + 1))
         scenario = self._scenario(seed, blocks)
         checked = check(scenario, write=False)
         view = blocksworld_view(checked.problem)
         if view.goal <= view.init:
-            return False
+            return "goal"
         plan, slots, initial = plan_and_layout(checked)
         roles = blocksworld_roles(checked.problem.domain)
         kinds = [roles.classify(a).canonical().name for a in plan.actions]
         eligible = [k for k, name in enumerate(kinds[: self.horizon]) if name in self.kinds]
         if not eligible:
-            return False
+            return "kinds"
         first = int(rng.choice(eligible))
         self._held = HeldSkill(self._lead)
         self._cake = build_diagram(scenario, checked.problem, initial, plan.actions,
@@ -245,7 +254,7 @@ class SkillEnv(gymnasium.Env):
             self._simulator.AdvanceTo(self._t / self.rate_hz)
             prog = self._progress()
             if prog.error is not None:
-                return False
+                return "lead"
             if prog.working >= 0 and prog.steps == 1:  # an action has just begun
                 starts += 1
                 if prog.working >= first and prog.context.schema in self.kinds:
@@ -253,12 +262,12 @@ class SkillEnv(gymnasium.Env):
             # A lead that struggles (repeats, replans) is not waited for: this draw is
             # given up once it has taken LEAD_PERIODS a planned action up to the chosen one.
             if self._t > (first + 1) * LEAD_PERIODS:
-                return False
+                return "lead"
         self._done, self._succeeded = prog.done, prog.succeeded
         self._ctx, self._schema = prog.context, prog.context.schema
         self._steps = 0
         self._start_z = self._cubes()[self._ctx.cube].translation()[2]
-        return True
+        return None
 
     def _progress(self):
         context = self._system.GetMyContextFromRoot(self._simulator.get_context())
@@ -271,18 +280,29 @@ class SkillEnv(gymnasium.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        why: dict[str, int] = {}
         for _ in range(MAX_DRAWS):
-            if self._try(int(self.np_random.integers(0, 2**31 - 1))):
+            reason = self._try(int(self.np_random.integers(0, 2**31 - 1)))
+            if reason is None:
                 return self._observe(ended=False)
-        raise ExecutionError(
-            f"CakeDrake/Skill-v0: no start in {MAX_DRAWS} draws (the lead skill "
-            f"{self.skill_path} gave each run up before a {'/'.join(self.kinds)} action)"
+            why[reason] = why.get(reason, 0) + 1
+        kinds = "/".join(self.kinds)
+        said = "; ".join(
+            f"{n} {NO_START[r].format(skill=self.skill_path, kinds=kinds, horizon=self.horizon)}"
+            for r, n in sorted(why.items(), key=lambda item: -item[1])
         )
+        raise ExecutionError(f"CakeDrake/Skill-v0: no start in {MAX_DRAWS} draws: {said}")
 
     def step(self, action):
         if self._simulator is None:
             raise RuntimeError("call reset() before step()")
-        self._held.action = np.asarray(action, np.float64)
+        given = np.asarray(action, np.float64)
+        if given.shape != self.action_space.shape or not np.all(np.isfinite(given)):
+            raise InputError(
+                f"CakeDrake/Skill-v0 step(): action {np.array2string(given, threshold=8)[:80]}; "
+                f"the action space is {self.action_space.shape[0]} finite numbers"
+            )
+        self._held.action = given
         self._t += 1
         self._simulator.AdvanceTo(self._t / self.rate_hz)
         self._steps += 1
