@@ -166,7 +166,8 @@ def suite(folder: Path, base: str = "", extra: str = "") -> Path:
 @pytest.mark.parametrize(
     ("flags", "words"),
     [
-        (["--steps", "0"], "training.rl.steps = 0: a whole number of environment steps, 1 or more"),
+        (["--steps", "0"], "training.rl.steps = 0: a whole number of environment steps, 1 to"),
+        (["--algorithm", "sac", "--steps", "1000000000000"], "steps, 1 to 100,000,000"),
         (["--steps", "-5"], "training.rl.steps = -5"),
         (["--steps", "100"], "fewer than one rollout (512 steps x 2 environments = 1024)"),
         (["--algorithm", "dqn"], "training.rl.algorithm 'dqn'; choose one of: ppo, sac"),

@@ -123,6 +123,13 @@ def _whole(value, low: int, high: int, where: str) -> int:
     return value
 
 
+#: The largest budget a recipe may ask for (years of simulated steps on these machines),
+#: and the largest replay buffer SAC keeps (Stable-Baselines3's default): it is sized by
+#: the budget below that.
+MAX_STEPS = 100_000_000
+REPLAY_MAX = 1_000_000
+
+
 def _number(value, low: float, high: float, where: str, low_open: bool = False) -> float:
     ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
     if not (ok and (value > low if low_open else value >= low) and value <= high):
@@ -146,9 +153,9 @@ def check_recipe(recipe: RlRecipe) -> RlRecipe:
     _whole(recipe.eval_every, 0, 100_000_000, f"{w}.eval_every")
     _whole(recipe.eval_episodes, 1, 10_000, f"{w}.eval_episodes")
     steps = recipe.steps
-    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 1:
+    if not isinstance(steps, int) or isinstance(steps, bool) or not 1 <= steps <= MAX_STEPS:
         raise InputError(f"{w}.steps = {steps!r:.24}: a whole number of environment steps, "
-                         "1 or more")  # fmt: skip
+                         f"1 to {MAX_STEPS:,}")  # fmt: skip
     one = recipe.rollout * recipe.envs
     if steps < one:
         raise InputError(
@@ -320,8 +327,9 @@ def _model(recipe: RlRecipe, venv, seed: int, residual: bool):
     else:
         from stable_baselines3 import SAC
 
+        replay = min(max(recipe.steps, 1000), REPLAY_MAX)
         model = SAC(
-            "MlpPolicy", venv, learning_rate=recipe.lr, buffer_size=max(recipe.steps, 1000),
+            "MlpPolicy", venv, learning_rate=recipe.lr, buffer_size=replay,
             learning_starts=recipe.rollout, batch_size=recipe.batch_size, gamma=recipe.gamma,
             policy_kwargs={**policy_kwargs, "log_std_init": recipe.log_std}, seed=seed,
             device="cpu", verbose=0,
