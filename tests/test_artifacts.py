@@ -4,6 +4,7 @@ by its own kind's describer."""
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -66,3 +67,34 @@ def test_evaluate_refuses_a_planner_folder_before_any_episode(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert "a learned planner (planner.json), not a whole-task policy" in r.stderr
     assert not (tmp_path / "ev").exists()
+
+
+@pytest.mark.parametrize(
+    ("yaml", "words"),
+    [
+        (
+            "reference: !Policy {checkpoint: package://cake_drake/policies/skills}",
+            "a skill that never sees the arm (skill.json), not a whole-task policy",
+        ),
+        (
+            "reference: !Policy {checkpoint: package://cake_drake/planners/blocks}",
+            "a learned planner (planner.json), not a whole-task policy",
+        ),
+        (
+            "motion: {skills: package://cake_drake/planners/blocks}",
+            "a learned planner (planner.json), not a learned skill",
+        ),
+        (
+            "motion: {skills: package://cake_drake/policies/stack2}",
+            "a whole-task policy (a LeRobot checkpoint), not a learned skill",
+        ),
+    ],
+    ids=["skill-as-policy", "planner-as-policy", "planner-as-skills", "policy-as-skills"],
+)
+def test_the_policy_and_skill_doors_name_the_kind_they_were_given(tmp_path, yaml, words):
+    from cake_drake.pipeline import check
+    from cake_drake.scenario import load_scenario
+
+    (tmp_path / "s.yaml").write_text(yaml + "\n")
+    with pytest.raises(InputError, match=re.escape(words)):
+        check(load_scenario(tmp_path / "s.yaml"), write=False)
