@@ -156,15 +156,18 @@ def release(skills: str, seed: int, png: Path) -> int:
 
     from cake_drake.errors import InputError
     from cake_drake.learning.policies.relative_skill import INPUT, WIDTH
+    from cake_drake.outputs.files import check_output_file
 
     try:
+        png = check_output_file(png)  # before the episode, not after it
         env = gymnasium.make("cake_drake.gym:CakeDrake/Skill-v0", skill=skills,
                              blocks=(3, 6), actions="put-down")  # fmt: skip
     except InputError as e:
         print(f"--release: {e}")
         return 2
     skill = env.unwrapped.lead  # the lead has begun the put-down: it goes on answering
-    if not hasattr(skill, "p_closed"):
+    decider = getattr(skill, "base", skill)  # a residual keeps its base's gripper
+    if not hasattr(decider, "p_closed"):
         print(f"--release: {skills} decides no gripper; a skill that never sees the arm does")
         return 2
     obs, _ = env.reset(seed=seed)
@@ -172,7 +175,7 @@ def release(skills: str, seed: int, png: Path) -> int:
     while not ended:
         action = skill.act({INPUT: obs})
         # observation.relative: the cube from the hand (4-6), where it rests from it (8-10)
-        frames.append((skill.p_closed, action[6] < 0.5, 1000 * obs[WIDTH],
+        frames.append((decider.p_closed, action[6] < 0.5, 1000 * obs[WIDTH],
                        1000 * (obs[6] - obs[10]), -1000 * obs[10]))  # fmt: skip
         obs, _, terminated, truncated, info = env.step(action)
         ended = terminated or truncated
@@ -181,7 +184,7 @@ def release(skills: str, seed: int, png: Path) -> int:
     t = (1 + np.arange(len(p))) / env.unwrapped.rate_hz  # the episode begins a period in
     opened = t[np.argmax(~closed)] if (~closed).any() else None
     fig, (top, low) = plt.subplots(2, 1, sharex=True, figsize=(7.5, 5.2))
-    threshold = skill.threshold
+    threshold = decider.threshold
     top.axhspan(1 - threshold, threshold, color="0.9", label="the last decision is held")
     top.plot(t, p, color="C0", marker=".", label="p(closed), the gripper head")
     top.step(t, closed.astype(float), where="post", color="C3", label="decision: closed")
@@ -207,7 +210,12 @@ def release(skills: str, seed: int, png: Path) -> int:
                    + ")")  # fmt: skip
     fig.suptitle(f"The release: one held-out put-down (seed {seed})\n{verdict}", fontsize=10)
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
+    try:
+        png.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(png, dpi=110)
+    except OSError as e:
+        print(f"--release: {png}: {e.strerror or e}; nothing was written")
+        return 4
     when = f"opened at {opened:.1f} s" if opened is not None else "never opened"
     print(f"{png}: {len(p)} periods, {when}, {verdict}")
     return 0

@@ -446,7 +446,7 @@ def test_the_release_is_drawn_for_a_skill_that_decides_its_gripper(tmp_path):
                               capture_output=True, text=True, timeout=600,
                               env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
 
-    png = tmp_path / "release.png"
+    png = tmp_path / "new" / "release.png"  # its folder made, as every output's
     r = bench("--release", str(png))
     assert r.returncode == 0, r.stderr
     assert f"{png}: " in r.stdout and "opened at" in r.stdout, r.stdout
@@ -457,3 +457,10 @@ def test_the_release_is_drawn_for_a_skill_that_decides_its_gripper(tmp_path):
     r = bench("--release", str(tmp_path / "no.png"), "--skills", str(tmp_path / "none"))
     assert r.returncode == 2 and "no such checkpoint folder" in r.stdout, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "no.png").exists()
+    r = bench("--release", str(tmp_path))  # onto a folder: refused before the episode
+    assert r.returncode == 2 and "is a folder, not a regular file" in r.stdout, r.stdout
+    r = bench("--release", str(tmp_path / "rl.png"), "--skills", str(SKILLS_RL))
+    assert r.returncode == 0 and "opened at" in r.stdout, r.stdout + r.stderr  # its base's
+
+
+SKILLS_RL = ROOT / "models" / "policies" / "skills_rl"
