@@ -190,8 +190,8 @@ def run_cli(main: Callable[[list[str] | None], int], argv: list[str] | None = No
             print(trace, end="", file=sys.stderr)
         print(f"error: {one_line(str(e))}", file=sys.stderr)
         return e.exit_code
-    except KeyboardInterrupt as e:
-        return _interrupted(str(e))
+    except KeyboardInterrupt as e:  # the signal that came, however a library re-raised it
+        return _interrupted(_signalled[0] if _signalled else str(e))
     except BrokenPipeError:
         # The reader went away (e.g. `| head`): stop quietly, as Unix tools do.
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -40,6 +40,18 @@ def cake(command: str, *args: str, cwd: Path = ROOT, timeout: float = 900, env_e
     )  # fmt: skip
 
 
+def short_folder() -> Path:
+    """A new empty folder in /tmp, removed when the session ends: pytest's own are too
+    deep for the sockets Ray makes in the temporary folder."""
+    import atexit
+    import shutil
+    import tempfile
+
+    folder = Path(tempfile.mkdtemp(prefix="t", dir="/tmp"))
+    atexit.register(shutil.rmtree, folder, True)
+    return folder
+
+
 def one_line(r, code: int, *words: str) -> None:
     assert r.returncode == code, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1, r.stderr
@@ -378,8 +390,11 @@ def test_on_local_ray_two_runners_write_the_same_files(trained, tmp_path):
     pytest.importorskip("ray")
     text = TINY.format(base="").replace("envs: 1", "envs: 2").replace("steps: 128", "steps: 256")
     (tmp_path / "tiny.yaml").write_text(text)
-    r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "o", "--ray", cwd=tmp_path)
+    temporary = short_folder()  # short enough for Ray's sockets
+    r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "o", "--ray", cwd=tmp_path,
+             env_extra={"TMPDIR": str(temporary)})  # fmt: skip
     assert r.returncode == 0, r.stdout + r.stderr
+    assert not list(temporary.glob("*ray*")), "Ray's session folder was left"
     out, alone = tmp_path / "o", trained / "scratch" / "out"
     assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in alone.iterdir())
     info = json.loads((out / "rl.json").read_text())
@@ -392,6 +407,36 @@ def test_on_local_ray_two_runners_write_the_same_files(trained, tmp_path):
     rows = (out / "progress.csv").read_text().splitlines()
     assert rows[0] == "steps,return,length,success,wall_s" and len(rows) == info["episodes"] + 1
     assert all(int(row.split(",")[2]) == 50 for row in rows[1:])  # episodes end at the budget
+
+
+@pytest.mark.slow
+def test_on_local_ray_sigterm_is_one_line_and_leaves_no_session_folder(tmp_path):
+    """Ray puts a crash dump and an abort 3 s later on SIGTERM: the command's own stop."""
+    import signal
+    import time
+
+    pytest.importorskip("ray")
+    text = TINY.format(base="").replace("envs: 1", "envs: 2").replace("steps: 128", "steps: 99999")
+    (tmp_path / "tiny.yaml").write_text(text)
+    temporary = short_folder()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "cake_drake.train", "--rl", "tiny.yaml", "--name", "tiny",
+         "--out", "o", "--ray"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT), "TMPDIR": str(temporary)},
+    )  # fmt: skip
+    deadline = time.monotonic() + 300
+    while not list((tmp_path / "o").glob(".staging-*")) and proc.poll() is None:
+        assert time.monotonic() < deadline, "the training never began"
+        time.sleep(0.2)
+    time.sleep(8)  # Ray's runners are up and stepping
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err == "error: interrupted by SIGTERM; nothing was written\n", err
+    assert not (tmp_path / "o").exists()
+    assert not list(temporary.glob("*ray*")), "Ray's session folder was left"
 
 
 def test_a_ray_address_nothing_answers_at_is_refused_before_training(tmp_path):

@@ -13,7 +13,11 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import shutil
+import signal
 import socket
+import tempfile
+import threading
 from collections import deque
 from collections.abc import Iterator, Sequence
 
@@ -57,6 +61,21 @@ class LocalPool:
             events.close()  # the workers gone, within a deadline, however this ends
 
 
+#: What Ray adds to its folder for its longest socket's path, which Linux bounds.
+_RAY_SOCKET_TAIL = len("/session_2026-12-02_05-48-20_304566_4194304/sockets/plasma_store")
+_SOCKET_PATH_MAX = 107
+
+
+def _session_folder() -> str:
+    """A new folder for a local Ray instance's session: in the temporary folder, or in
+    /tmp where that one's path is too long for Ray's sockets."""
+    folder = tempfile.mkdtemp(prefix="cake_drake_ray_")
+    if len(os.fsencode(folder)) + _RAY_SOCKET_TAIL > _SOCKET_PATH_MAX:
+        os.rmdir(folder)
+        folder = tempfile.mkdtemp(prefix="cake_drake_ray_", dir="/tmp")
+    return folder
+
+
 class RayCluster:
     """Ray: a local instance started here (``address=None``), or a cluster joined at
     ``address`` (``auto`` for the cluster this machine belongs to, or ``HOST:PORT``).
@@ -71,6 +90,7 @@ class RayCluster:
         self.address = address
         self.num_cpus = num_cpus
         self._started = False
+        self._folder: str | None = None
         if importlib.util.find_spec("ray") is None:
             raise InputError("--ray needs Ray: pip install 'cake_drake[ray]' (or pip install ray)")
         self._reachable()  # before the sweep writes anything
@@ -83,17 +103,35 @@ class RayCluster:
 
         if not ray.is_initialized():
             kwargs = dict(include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+            # Ray puts its own handlers on SIGINT and SIGTERM (a crash dump and an abort
+            # 3 s after SIGTERM): the command's are put back, so a stop is one line and 130.
+            handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
             try:
                 if self.address:
                     ray.init(address=self.address, **kwargs)
-                else:
-                    ray.init(num_cpus=self.num_cpus, **kwargs)
+                else:  # its session folder (logs, sockets) in one of ours, removed at stop
+                    self._folder = _session_folder()
+                    ray.init(num_cpus=self.num_cpus, _temp_dir=self._folder, **kwargs)
             except (ConnectionError, ValueError, RuntimeError) as e:
+                self._remove_folder()
                 where = self.address or "a local instance"
                 first = (str(e).strip().splitlines() or [type(e).__name__])[0]
                 raise InputError(f"--ray {where}: cannot start or join Ray ({first})") from None
+            except BaseException:  # an interrupt while it starts
+                ray.shutdown()
+                self._remove_folder()
+                raise
+            finally:
+                if threading.current_thread() is threading.main_thread():
+                    for s, handler in handlers.items():
+                        signal.signal(s, handler)
             self._started = True
         return ray
+
+    def _remove_folder(self) -> None:
+        if self._folder is not None:
+            shutil.rmtree(self._folder, ignore_errors=True)
+            self._folder = None
 
     def _reachable(self) -> None:
         """Refuse an address nothing answers at (Ray itself would retry for minutes)."""
@@ -119,6 +157,7 @@ class RayCluster:
 
             ray.shutdown()
             self._started = False
+            self._remove_folder()
 
     def imap(self, fn, items: Sequence) -> Iterator:
         """``fn(item)`` for every item, each on a Ray worker (one CPU each), yielded as

@@ -77,9 +77,14 @@ def ray_vec_env(factory, runners: int, cluster):
         def __init__(self) -> None:
             self.cluster = cluster
             self.ray = ray = cluster.start()
-            actor = ray.remote(num_cpus=1, max_restarts=0)(_Runner)
-            self.runners = [actor.remote(factory) for _ in range(runners)]
-            obs_space, act_space, metadata = self._get([self.runners[0].spaces.remote()])[0]
+            self.runners = []
+            try:  # an interrupt while the runners start stops Ray as close() does
+                actor = ray.remote(num_cpus=1, max_restarts=0)(_Runner)
+                self.runners = [actor.remote(factory) for _ in range(runners)]
+                obs_space, act_space, metadata = self._get([self.runners[0].spaces.remote()])[0]
+            except BaseException:
+                self._stop()
+                raise
             super().__init__(runners, obs_space, act_space)
             self.metadata = metadata
             self._pending: list = []
@@ -124,10 +129,13 @@ def ray_vec_env(factory, runners: int, cluster):
                 if self.runners:
                     self._get([r.close.remote() for r in self.runners])
             finally:
-                for r in self.runners:
-                    self.ray.kill(r)
-                self.runners = []
-                self.cluster.stop()
+                self._stop()
+
+        def _stop(self) -> None:
+            for r in self.runners:
+                self.ray.kill(r)
+            self.runners = []
+            self.cluster.stop()
 
         def get_attr(self, attr_name: str, indices=None) -> list[Any]:
             return self._get([self.runners[k].get.remote(attr_name)
