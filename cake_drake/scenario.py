@@ -26,6 +26,7 @@ import math
 import os
 import sys
 import typing
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -438,6 +439,8 @@ def _union_members(tp) -> tuple:
 
 
 def _where(source: str, node: yaml.Node) -> str:
+    if source.startswith(SET_FLAG):  # a setting is one line of the command's
+        return source
     return f"{source}:{node.start_mark.line + 1}"
 
 
@@ -636,15 +639,53 @@ def _first_line(e: Exception) -> str:
     return (str(e).strip().splitlines() or [type(e).__name__])[0]
 
 
-def load_scenario(path: str | Path, name: str | None = None) -> Scenario:
-    """Read a scenario file; relative paths inside it are taken from the file's folder."""
+def load_scenario(
+    path: str | Path, name: str | None = None, settings: Sequence[str] = ()
+) -> Scenario:
+    """Read a scenario file; relative paths inside it are taken from the file's folder.
+    ``settings`` (``--set``'s) are written over it (:func:`with_settings`)."""
     path = Path(path)
     text = read_text(path, "scenario file (*.yaml)", allow_empty=True)
     scenario = parse_scenario(text, str(path), name)
     try:
-        return resolved(scenario, path.resolve().parent)
+        scenario = resolved(scenario, path.resolve().parent)
     except InputError as e:
         raise InputError(f"{path}: {e}") from None
+    return with_settings(scenario, settings)
+
+
+#: The flag that sets any scenario field from the command line.
+SET_FLAG = "--set"
+
+
+def with_settings(scenario: Scenario, settings: Sequence[str]) -> Scenario:
+    """``scenario`` with each ``section.field=VALUE`` written over it, in order: VALUE is
+    read as YAML (``depth``, ``0.5``, ``[100, 100]``, ``!Pid {kp: [50]}``) and checked as a
+    scenario file's field is (an unknown field or a wrong type is one line naming it); a
+    relative path in it is taken from the working folder."""
+    for given in settings:
+        key, eq, value = given.partition("=")
+        parts = key.split(".")
+        if not eq or not all(part.isidentifier() for part in parts) or "\n" in value:
+            raise InputError(
+                f"{SET_FLAG} {given!r:.80}: give section.field=VALUE, the value as YAML "
+                "(e.g. --set perception.estimator=depth); sections: "
+                f"{', '.join(_fields(Scenario))}"
+            )
+        text = "".join(f"{'  ' * i}{part}:\n" for i, part in enumerate(parts[:-1]))
+        text += f"{'  ' * (len(parts) - 1)}{parts[-1]}: {value}\n"
+        source = f"{SET_FLAG} {key}"
+        root = _top_level(text, source)
+        _check_node(root, Scenario, source, "")
+        try:
+            scenario = yaml_load_typed(schema=Scenario, data=text, defaults=scenario)
+        except Exception as e:  # noqa: BLE001 - the typed loader's message, as one line
+            raise InputError(f"{source}: {_first_line(e)}") from None
+        try:
+            scenario = resolved(scenario, Path.cwd())
+        except InputError as e:
+            raise InputError(f"{source}: {e}") from None
+    return scenario
 
 
 def scenario_names(path: str | Path) -> list[str]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import re
 import shutil
 import subprocess
 import sys
@@ -230,3 +232,91 @@ def test_a_run_is_reproduced_bit_for_bit_from_its_scenario_yaml(tmp_path):
         **{**load_scenario(first / "scenario.yaml").__dict__, "outputs": saved.outputs}
     )
     assert saved.seed == 3 and saved.world.time_step == 0.008
+
+
+# --- --set: any field from the command line ------------------------------------------------
+
+
+def test_a_setting_is_read_as_yaml_and_written_over_the_scenario():
+    from cake_drake.scenario import Pid, with_settings
+
+    s = with_settings(Scenario(), [
+        "perception.noise.model=axial", "world.cube_mass_kg=0.5", "controller=!Pid {kp: [50]}",
+        "perception.cameras=[{name: top, xyz: [0.5, 0, 1.2]}]", "seed=7",
+        "task.problem=models/pddl/tower3.pddl",  # from the working folder
+    ])  # fmt: skip
+    assert s.perception.noise.model == "axial" and s.perception.noise.sigma_m == 0.0012
+    assert s.world.cube_mass_kg == 0.5 and s.seed == 7
+    assert isinstance(s.controller, Pid) and s.controller.kp == [50.0]
+    assert [c.name for c in s.perception.cameras] == ["top"]
+    assert s.task.problem == "package://cake_drake/pddl/tower3.pddl"
+    assert s.task.planner == Scenario().task.planner  # the rest as it was
+
+
+@pytest.mark.parametrize(
+    ("given", "words"),
+    [
+        (
+            "perception.noise.modle=axial",
+            "--set perception.noise.modle: unknown key 'modle' in perception.noise; valid keys: "
+            "model, sigma_m, growth",
+        ),
+        ("world.cube_mass_kg=heavy", "--set world.cube_mass_kg: world.cube_mass_kg = 'heavy'"),
+        ("perception", "--set 'perception': give section.field=VALUE"),
+        ("percepton.estimator=depth", "unknown key 'percepton' in the scenario; valid keys: task"),
+    ],
+)
+def test_a_bad_setting_is_one_line_naming_the_field(given, words):
+    from cake_drake.scenario import with_settings
+
+    with pytest.raises(InputError, match=re.escape(words)):
+        with_settings(Scenario(), [given])
+
+
+LEARNING = "models/scenarios/learning.yaml"
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["run"],
+        ["run", "--scenario", "models/scenarios/exercise.yaml", "--name", "pid"],
+        ["evaluate", "package://cake_drake/policies/stack2", "--suite", LEARNING, "--name",
+         "stack2"],
+        ["record", LEARNING, "--name", "stack2", "--out", "{tmp}/d"],
+        ["sweep", "models/sweeps/smoke.yaml", "--out", "{tmp}/s"],
+        ["train", "--rl", LEARNING, "--name", "stack2", "--out", "{tmp}/t"],
+        ["gains", "--out", "{tmp}/g"],
+    ],
+    ids=lambda c: "-".join(c[:2]) if c[:2] == ["run", "--scenario"] else c[0],
+)  # fmt: skip
+def test_every_command_that_reads_a_scenario_takes_set(tmp_path, command):
+    args = [a.replace("{tmp}", str(tmp_path)) for a in command]
+    r = subprocess.run(
+        [sys.executable, "-m", f"cake_drake.{args[0]}", *args[1:], "--set", "world.cube_mas_kg=1"],
+        capture_output=True, text=True, cwd=ROOT, timeout=300,
+    )  # fmt: skip
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert (
+        r.stderr.startswith(
+            "error: --set world.cube_mas_kg: unknown key 'cube_mas_kg' in world; valid keys: "
+        )
+        and r.stderr.count("\n") == 1
+    ), r.stderr
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_a_run_with_settings_records_them_in_its_scenario(tmp_path):
+    """Fields no flag sets, set from the command line; scenario.yaml runs it again."""
+    out = tmp_path / "o"
+    r = subprocess.run(
+        [sys.executable, "-m", "cake_drake.run", "--set", "world.cube_mass_kg=0.06", "--set",
+         "perception.estimator=depth", "--quiet", "--out", str(out)],
+        capture_output=True, text=True, cwd=ROOT, timeout=600,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    again = load_scenario(out / "scenario.yaml")
+    assert again.world.cube_mass_kg == 0.06 and again.perception.estimator == "depth"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["perception"]["estimator"] == "depth"

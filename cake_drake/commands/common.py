@@ -1,5 +1,5 @@
-"""What the commands' parsers share: usage errors as one line, ``--ray``, ``--workers`` and
-``--time-limit`` checked the same way everywhere."""
+"""What the commands' parsers share: usage errors as one line, ``--set``, ``--ray``,
+``--workers`` and ``--time-limit`` checked the same way everywhere."""
 
 from __future__ import annotations
 
@@ -33,6 +33,19 @@ def add_ray_flag(p: argparse.ArgumentParser) -> None:
         const="",
         metavar="ADDRESS",
         help="episodes on Ray: a local instance, or the cluster at ADDRESS (auto | HOST:PORT)",
+    )
+
+
+def add_set_flag(p: argparse.ArgumentParser, what: str = "the scenario") -> None:
+    """``--set section.field=VALUE``, repeatable: any field of ``what``, from the command
+    line (:func:`cake_drake.scenario.with_settings`)."""
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="SECTION.FIELD=VALUE",
+        help=f"set one field of {what}, the value read as YAML (e.g. --set "
+        "perception.estimator=depth --set world.cube_mass_kg=0.5); repeatable",
     )
 
 

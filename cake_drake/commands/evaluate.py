@@ -13,7 +13,13 @@ from collections.abc import Callable
 from pathlib import Path
 
 from cake_drake import artifacts
-from cake_drake.commands.common import CliParser, add_ray_flag, ray_engine, worker_count
+from cake_drake.commands.common import (
+    CliParser,
+    add_ray_flag,
+    add_set_flag,
+    ray_engine,
+    worker_count,
+)
 from cake_drake.errors import EXIT_OK, InputError
 
 EVALUATE_DOC = """Evaluate a policy on seeded generated problems: success rate with a 95 %
@@ -55,6 +61,7 @@ def evaluate_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     add_ray_flag(p)
     p.add_argument("--out", type=Path, default=Path("outputs") / "evaluate")
+    add_set_flag(p, "the suite's scenario")
     return p
 
 
@@ -73,7 +80,7 @@ def main_evaluate(argv: list[str] | None = None) -> int:
         raise InputError(f"--episodes {args.episodes}: from 1 to 100000")
     if not 0 <= args.frames <= 64:
         raise InputError(f"--frames {args.frames}: from 0 (no picture) to 64 failed episodes")
-    scenario = load_scenario(args.suite, args.name)
+    scenario = load_scenario(args.suite, args.name, args.set)
     checkpoint = Path(args.policy).is_dir() or not is_plugin(args.policy)
     spec = replace(spec_from_scenario(scenario, args.policy), cameras=())
     # The folder's kind, decided once (cake_drake.artifacts): what evaluate runs is a

@@ -9,7 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cake_drake.commands.common import CliParser
+from cake_drake.commands.common import CliParser, add_set_flag
 from cake_drake.errors import EXIT_OK
 
 GAINS_DOC = """Gains study: replay one recorded trajectory through InverseDynamicsController per Kd.
@@ -52,16 +52,25 @@ def gains_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", type=Path, default=Path("outputs"), help="output folder")
     p.add_argument("--quiet", action="store_true")
+    add_set_flag(p, "the scenario")
     return p
 
 
 def main_gains(argv: list[str] | None = None) -> int:
     from cake_drake.gains import GAINS_OUTPUTS, format_table, gains_inputs, write_study
     from cake_drake.outputs.files import check_output_folder
-    from cake_drake.scenario import ComputedTorque, Recorded, Scenario, load_scenario, portable_path
+    from cake_drake.scenario import (
+        ComputedTorque,
+        Recorded,
+        Scenario,
+        load_scenario,
+        portable_path,
+        with_settings,
+    )  # fmt: skip
 
     args = gains_parser().parse_args(argv)
-    base = load_scenario(args.scenario, args.name) if args.scenario else Scenario()
+    base = (load_scenario(args.scenario, args.name, args.set) if args.scenario
+            else with_settings(Scenario(), args.set))  # fmt: skip
     base.controller = ComputedTorque(kp=[args.kp])
     if args.problem is not None:
         base.task.problem = portable_path(args.problem)

@@ -9,7 +9,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cake_drake.commands.common import CliParser, add_ray_flag, ray_engine, worker_count
+from cake_drake.commands.common import (
+    CliParser,
+    add_ray_flag,
+    add_set_flag,
+    ray_engine,
+    worker_count,
+)
 from cake_drake.errors import EXIT_OK, InputError
 
 RECORD_DOC = """Record demonstrations as a LeRobot dataset (v3.0), or check one by replaying it.
@@ -76,6 +82,7 @@ def record_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--resume", action="store_true", help="continue an interrupted recording")
     p.add_argument("--replay", type=Path, metavar="DATASET", help="replay a dataset's actions")
+    add_set_flag(p, "the scenario")
     return p
 
 
@@ -100,7 +107,7 @@ def main_record(argv: list[str] | None = None) -> int:
         raise InputError("record: give a scenario file and --out DATASET (or --replay DATASET)")
     if not 1 <= args.episodes <= 100_000:
         raise InputError(f"--episodes {args.episodes}: from 1 to 100000")
-    scenario = load_scenario(args.spec, args.name)
+    scenario = load_scenario(args.spec, args.name, args.set)
     spec = spec_from_scenario(scenario, args.policy)
     if args.no_cameras:
         spec = replace(spec, cameras=())

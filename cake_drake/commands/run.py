@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from cake_drake.commands import STARTED
-from cake_drake.commands.common import CliParser, check_time_limit
+from cake_drake.commands.common import CliParser, add_set_flag, check_time_limit
 from cake_drake.errors import EXIT_EXECUTION_FAILED, EXIT_OK, InputError
 
 RUN_DOC = """Run the whole cake: plan a Blocksworld problem, execute it on a simulated Panda.
@@ -129,6 +129,7 @@ def run_parser() -> argparse.ArgumentParser:
         "none; each camera's last frame is written as camera_<name>.png",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_set_flag(p, "the scenario")
     return p
 
 
@@ -142,11 +143,15 @@ def scenario_from_args(args: argparse.Namespace):
         controller_for_mode,
         load_scenario,
         portable_path,
+        with_settings,
     )
 
     if args.name and not args.scenario:
         raise InputError("--name chooses a scenario of a --scenario file; give the file too")
-    s = load_scenario(args.scenario, args.name) if args.scenario else Scenario()
+    if args.scenario:
+        s = load_scenario(args.scenario, args.name, args.set)
+    else:
+        s = with_settings(Scenario(), args.set)
     if args.mode and type(s.controller) is not type(controller_for_mode(args.mode)):
         s.controller = controller_for_mode(args.mode)
     for flag in ("kp", "kd"):

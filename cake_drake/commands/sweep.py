@@ -9,7 +9,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from cake_drake.commands.common import CliParser
+from cake_drake.commands.common import CliParser, add_set_flag
 from cake_drake.errors import EXIT_OK
 
 SWEEP_DOC = """Run a sweep: many scenarios in parallel, one table of results, plots.
@@ -50,14 +50,19 @@ def sweep_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--resume", action="store_true", help="keep finished runs, run the rest")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_set_flag(p, "the sweep's base scenario")
     return p
 
 
 def main_sweep(argv: list[str] | None = None) -> int:
+    from cake_drake.scenario import with_settings
     from cake_drake.sweeps import LocalPool, RayCluster, load_sweep, run_sweep
 
     args = sweep_parser().parse_args(argv)
     sweep = load_sweep(args.sweep)
+    if args.set:  # the base as run, and in the folder's copy of the file, what changed it
+        sweep.base = with_settings(sweep.base, args.set)
+        sweep.text += "".join(f"# run with --set {given}\n" for given in args.set)
     out = args.out or Path("outputs") / "sweeps" / args.sweep.stem
     engine = LocalPool(args.workers) if args.ray is None else RayCluster(args.ray or None)
     if not args.quiet:

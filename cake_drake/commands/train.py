@@ -13,7 +13,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from cake_drake.commands.common import CliParser, add_ray_flag, ray_engine, worker_count
+from cake_drake.commands.common import (
+    CliParser,
+    add_ray_flag,
+    add_set_flag,
+    ray_engine,
+    worker_count,
+)
 from cake_drake.errors import EXIT_OK, InputError
 
 TRAIN_DOC = """Train a policy on a recording with LeRobot's own training loop, offline.
@@ -170,6 +176,7 @@ def train_parser() -> argparse.ArgumentParser:
     p.add_argument("--round-steps", type=int, metavar="N", help="DAgger: fine-tuning steps")
     p.add_argument("--workers", type=int, help="DAgger: rollout processes (default: cores)")
     add_ray_flag(p)
+    add_set_flag(p, "the --rl scenario")
     return p
 
 
@@ -334,7 +341,7 @@ def _main_rl(args: argparse.Namespace) -> int:
         raise InputError(f"--device {args.device} with --rl: it trains on the CPU")
     if not args.name:
         raise InputError(f"--rl {args.rl} without --name: name the task to learn")
-    scenario = load_scenario(args.rl, args.name)
+    scenario = load_scenario(args.rl, args.name, args.set)
     recipe = scenario.training.rl
     given = {"steps": args.steps, "base": args.base, "algorithm": args.algorithm,
              "envs": args.envs}  # fmt: skip
@@ -470,7 +477,7 @@ MODES: tuple[Mode, ...] = (
         chooser="rl",
         whose="RL's",
         reads=frozenset(
-            {"rl", "name", "base", "algorithm", "envs", "steps", "device", "seed", "ray"}
+            {"rl", "name", "base", "algorithm", "envs", "steps", "device", "seed", "ray", "set"}
         ),
         refusal="it is not one of RL's settings (the task's training.rl recipe has them)",
         main=_main_rl,
