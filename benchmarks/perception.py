@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 import time
 from collections import Counter
 from pathlib import Path
@@ -38,27 +37,17 @@ from pathlib import Path
 import numpy as np
 from cake import why  # a failure's kind, as the cake's table says it
 from machine import machine
+from skills import scenario_for as skills_scenario  # benchmarks/skills.py
 
-ROOT = Path(__file__).resolve().parent.parent
-SUITE = ROOT / "models" / "scenarios" / "learning.yaml"
 SKILLS = "package://cake_drake/policies/skills"
 DEV_SEED, TEST_SEED = 200000, 500000
 COLUMNS = ("truth", "depth", "depth+noise")
 
 
 def scenario_for(row: str, column: str, seed: int, skills: str):
-    """The episode's scenario: ``row``'s problem and world, ``column``'s estimator."""
-    from cake_drake.scenario import Generate, load_scenario
-
-    s = load_scenario(SUITE, "learned_tower5")  # problem_5, towers placed at random
-    s.seed = seed
-    s.outputs.render = False
-    s.motion.skills = skills
-    match = re.fullmatch(r"(generated|tall)(\d+)", row)
-    if match:
-        s.task.generate = Generate(blocks=int(match[2]), seed=seed, tall=match[1] == "tall")
-        s.task.problem = ""
-        s.world.placement.xy = s.world.placement.yaw_deg = 0.0
+    """The episode's scenario: ``row``'s problem and world (the skills table's), ``column``'s
+    estimator."""
+    s = skills_scenario(row, skills, seed)
     s.perception.estimator = "truth" if column == "truth" else "depth"
     s.perception.noise.model = "axial" if column.endswith("noise") else "off"
     return s
