@@ -1,10 +1,20 @@
 """cake_drake: the classical robot-manipulation cake as one Drake systems diagram.
 
 Layers (one sub-package each): ``symbolic`` (PDDL -> plan), ``world`` (the scene),
-``geometric`` (waypoints -> IK -> joint trajectory), ``dynamic`` (controllers),
-``systems`` (our LeafSystems) and ``diagram`` (the wiring); ``learning`` above the
-pipeline (the learned half), ``commands`` above all (one module a command). Their order
-is a contract (docs/architecture.md).
+``perception`` (the cubes from the cameras), ``geometric`` (waypoints -> IK -> joint
+trajectory), ``dynamic`` (controllers), ``systems`` (our LeafSystems), ``policy`` (a
+learned policy's slot in the Diagram), ``language`` (SayCan transcripts onto PDDL);
+``learning`` above the pipeline (the learned half), ``outputs`` (what a run shows),
+``sweeps`` and ``gains`` (many runs), ``commands`` above all (one module a command).
+Their order is a contract (docs/architecture.md).
+
+Beside them, one module a door: ``scenario`` (a run as data), ``pipeline`` (a run as a
+library call), ``diagram`` (the one wiring), ``execution`` (simulating it), ``plugins``
+(every implementation's door), ``artifacts`` (the learned kinds), ``formats`` and
+``paths`` (the files), ``errors`` (exit codes), ``processes`` (owned process groups) and
+``gym`` (the Gymnasium environments). ``run``, ``plan``, ``validate``, ``saycan``,
+``sweep``, ``record``, ``evaluate`` and ``train`` are ``python -m cake_drake.COMMAND``;
+``cli`` is the ``cake-drake`` console script.
 """
 
 import os

@@ -12,6 +12,7 @@ logs; it returns:
   poses);
 * one :class:`Replay` per Kd (its logs), for :func:`comparison_plot` (``kd_comparison.png``).
 
+``step`` holds the lesson against theory (a step response, an unmodelled payload).
 ``python -m cake_drake.gains`` is the command (``gains/__main__.py``; its parsing lives
 with the other commands', which the library never imports).
 """

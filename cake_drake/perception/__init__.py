@@ -2,7 +2,7 @@
 
 ``truth`` reads the simulator's own body poses (no system at all: the plant's port, as
 every run before this layer); ``depth`` and ``oracle`` are a :class:`CubeEstimator` on
-cameras of their own, answering the plant's ``body_poses`` shape. ``diagram.py`` wires
+cameras of their own, answering the plant's ``body_poses`` shape. :mod:`cake_drake.diagram` wires
 whichever port the scenario names into every consumer; the verdict and the error log
 keep reading the truth.
 

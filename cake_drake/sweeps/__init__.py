@@ -4,8 +4,10 @@ A sweep is a base scenario plus axes over its fields and a number of seeds
 (:mod:`~cake_drake.sweeps.spec`); each run is one scenario, built and simulated inside
 its worker (:mod:`~cake_drake.sweeps.worker`), on a local process pool or on Ray
 (:mod:`~cake_drake.sweeps.engines`); the rows go into one table with plots chosen by the
-axes (:mod:`~cake_drake.sweeps.table`). ``python -m cake_drake.sweep SWEEP.yaml`` is the
-command; :func:`run_sweep` the library call.
+axes (:mod:`~cake_drake.sweeps.table`). :mod:`~cake_drake.sweeps.driver` runs one from
+end to end; :mod:`~cake_drake.sweeps.collect` holds what a run gathers beside its
+metrics, :mod:`~cake_drake.sweeps.pool` the local pool's processes. ``python -m
+cake_drake.sweep SWEEP.yaml`` is the command; :func:`run_sweep` the library call.
 """
 
 from cake_drake.sweeps.driver import SweepResult, run_sweep

@@ -5,7 +5,11 @@ Parsing with positions (:mod:`.pddl`), grounding and STRIPS semantics
 (:mod:`.plans`), VAL-like validation (:mod:`.validation`), diagnosis of
 unsolvable problems (:mod:`.diagnose`), Blocksworld read by structure
 (:mod:`.roles`: which predicate means "on", which action picks, whatever the
-names) and Blocksworld helpers and generators (:mod:`.blocksworld`). Facts are
+names) and Blocksworld helpers and generators (:mod:`.blocksworld`); text and
+S-expressions read with their positions (:mod:`.sexpr`), a domain written from memory
+checked against the textbook's (:mod:`.domain_check`), a plan's kernels (:mod:`.kernels`:
+what each suffix needs of the world), Fast Downward as a subprocess
+(:mod:`.fast_downward`) and the learned planner (:mod:`.learned`). Facts are
 tuples of lower-case strings: ``("on", "a", "b")``, ``("arm-empty",)``.
 """
 

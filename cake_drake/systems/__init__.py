@@ -1,5 +1,8 @@
-"""The project's own LeafSystems, one per file: :class:`PlanSource`,
-:class:`ExecutionMonitor` and :class:`WaypointIk`.
+"""The project's own LeafSystems, one per file: :class:`PlanSource` (``plan_source``),
+:class:`ExecutionMonitor` (``monitor``), :class:`WaypointIk` (``waypoint_ik``: the
+geometric layer), ``LearnedSkills`` (``skills``: the geometric layer learned) and
+``PolicySource`` (``policy_source``: a whole-task policy in the source's and the IK's
+place). The perception layer's estimator lives in :mod:`cake_drake.perception`.
 
 :data:`ACTION_SOURCES` is the registry of action sources a scenario can name
 (``reference: {action_source: monitor}``); :func:`make_action_source` builds one, or a

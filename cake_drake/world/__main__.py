@@ -1,6 +1,7 @@
 """``python -m cake_drake.world``: lay out a problem's initial state and render it.
 
-The argument parsing lives in :mod:`cake_drake.commands.world`; the work in :mod:`.show`.
+The argument parsing and the layout live in :mod:`cake_drake.commands.world`; the
+pictures in :mod:`.render`.
 """
 
 from cake_drake.commands.world import main_world
