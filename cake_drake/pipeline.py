@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
-from cake_drake import artifacts
 from cake_drake.diagram import CakeDiagram, build_diagram
 from cake_drake.dynamic.controllers import per_joint
 from cake_drake.errors import InputError, NoPlanError
@@ -355,9 +354,7 @@ def check_skills(motion) -> None:
             f"{motion.skill_device}: the ensembled skill acts in NumPy on the CPU; set "
             "skill_device: cpu, or skill_ensemble: 0"
         )
-    path = resolve_path(motion.skills)
-    artifacts.require(path, *artifacts.SKILL_KINDS, role="motion.skills")
-    check_folder(path, motion.skill_device, motion.skill_action_space)
+    check_folder(resolve_path(motion.skills), motion.skill_device, motion.skill_action_space)
 
 
 def check_policy(ref: Policy, cameras=()) -> None:
@@ -375,9 +372,7 @@ def check_policy(ref: Policy, cameras=()) -> None:
         # The learned layer's adapter, through the plug-in door (nothing here imports it).
         load_attribute(CHECKPOINT_POLICY, "policy")
         check_folder = load_attribute(CHECKPOINT_CHECK, "policy")
-        path = resolve_path(ref.checkpoint)
-        artifacts.require(path, "policy", "rl", role="reference: !Policy {checkpoint}")
-        check_folder(path, ref.action_space, ref.device, cameras)
+        check_folder(resolve_path(ref.checkpoint), ref.action_space, ref.device, cameras)
     elif not ref.factory:
         raise InputError(
             "reference: !Policy needs a factory (module:attribute, "

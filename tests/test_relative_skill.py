@@ -189,7 +189,7 @@ def test_a_format_1_skill_is_acted_as_it_was_trained(tmp_path):
     assert rs.RelativeSkill(write_skill(tmp_path / "t")).format4
     (folder / "skill.json").write_text(json.dumps({**meta, "format": 5}))
     with pytest.raises(
-        InputError, match=r"skill.json: format 5; this cake_drake reads 1 or 2 or 3 or 4"
+        InputError, match=r"skill.json: field .format. is 5; this version reads 1 or 2 or 3 or 4"
     ):
         rs.RelativeSkill(folder)
     (folder / "skill.json").write_text(json.dumps({**meta, "move_scale_m": "5 mm"}))

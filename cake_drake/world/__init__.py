@@ -2,5 +2,5 @@
 cameras (``cameras.py``) and the renderer (``render.py``), the cubes placed from a PDDL
 state and read back as PDDL facts (``facts.py``), and the faults a scenario injects
 (``faults.py``). ``python -m cake_drake.world`` lays a problem out and renders it (its
-command module, :mod:`cake_drake.commands.world`).
+command module does, which the library never imports).
 """

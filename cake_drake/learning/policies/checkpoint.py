@@ -49,6 +49,7 @@ def check_folder(path: Path, action_space: str, device: str = "auto", cameras=No
     here (:func:`cake_drake.learning.policies.lerobot_checkpoint.check_folder`, or for an
     RL training's folder :func:`cake_drake.learning.policies.rl.check_folder`); the model's
     folder (an RL folder: itself)."""
+    artifacts.require(path, "policy", "rl", role="reference: !Policy {checkpoint}")
     if _rl(path):
         rl.check_folder(path, action_space, device, cameras)
         return Path(path)

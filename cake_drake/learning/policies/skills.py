@@ -63,6 +63,7 @@ def check_folder(path: Path, device: str = "cpu", action_space: str = "") -> Pat
     policy, another skill layout or action space (``action_space``: the one the scenario
     asks for, ``relative`` for a skill that never sees the arm, empty for the folder's
     own), a device that is not here. The model's folder."""
+    artifacts.require(path, *artifacts.SKILL_KINDS, role="motion.skills")  # the kind first
     if _relative(path):
         if action_space not in ("", RELATIVE):
             raise InputError(
