@@ -412,6 +412,8 @@ def resolved(scenario: Scenario, base: Path | None) -> Scenario:
     out = _copy(scenario)
     for section, name, prefix in _scenario_paths(out):
         path = getattr(section, name)[len(prefix) :]
+        if not path:  # no file (a generated problem has no problem file)
+            continue
         try:
             setattr(section, name, prefix + portable_path(resolve_path(path, base)))
         except InputError as e:  # the field it was given in, before the path's fault

@@ -251,6 +251,8 @@ def test_a_setting_is_read_as_yaml_and_written_over_the_scenario():
     assert [c.name for c in s.perception.cameras] == ["top"]
     assert s.task.problem == "package://cake_drake/pddl/tower3.pddl"
     assert s.task.planner == Scenario().task.planner  # the rest as it was
+    s = with_settings(Scenario(), ["task.generate={blocks: 8, tall: true}", 'task.problem=""'])
+    assert s.task.generate.blocks == 8 and s.task.generate.tall and s.task.problem == ""
 
 
 @pytest.mark.parametrize(
