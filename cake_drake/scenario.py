@@ -685,8 +685,8 @@ def with_settings(scenario: Scenario, settings: Sequence[str]) -> Scenario:
             raise InputError(f"{source}: {_first_line(e)}") from None
         try:
             scenario = resolved(scenario, Path.cwd())
-        except InputError as e:
-            raise InputError(f"{source}: {e}") from None
+        except InputError as e:  # it names the field set
+            raise InputError(f"{SET_FLAG} {e}") from None
     return scenario
 
 
