@@ -439,6 +439,35 @@ def test_on_local_ray_sigterm_is_one_line_and_leaves_no_session_folder(tmp_path)
     assert not list(temporary.glob("*ray*")), "Ray's session folder was left"
 
 
+@pytest.mark.parametrize("delay", [0.3, 1.5])
+def test_sigterm_while_local_ray_starts_is_the_command_s_stop(delay):
+    """While ``ray.init`` runs, Ray's own handlers meet a SIGTERM (exit 15, or an abort
+    3 s on): the command still ends as stopped by SIGTERM, its session folder gone."""
+    pytest.importorskip("ray")
+    script = (
+        "import os, signal, sys, threading, time\n"
+        "from cake_drake.errors import run_cli\n"
+        "from cake_drake.sweeps import RayCluster\n"
+        "def main(argv):\n"
+        "    c = RayCluster(None, 1)\n"
+        f"    threading.Timer({delay}, os.kill, (os.getpid(), signal.SIGTERM)).start()\n"
+        "    try:\n"
+        "        c.start()\n"
+        "        time.sleep(30)\n"
+        "    finally:\n"
+        "        c.stop()\n"
+        "    return 0\n"
+        "raise SystemExit(run_cli(main, []))\n"
+    )
+    temporary = short_folder()
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                       timeout=120, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT),
+                                                   "TMPDIR": str(temporary)})  # fmt: skip
+    assert r.returncode == 130, r.stderr
+    assert r.stderr.splitlines()[-1] == "error: interrupted by SIGTERM; nothing was written"
+    assert not list(temporary.glob("*ray*")), "Ray's session folder was left"
+
+
 def test_a_ray_address_nothing_answers_at_is_refused_before_training(tmp_path):
     pytest.importorskip("ray")
     r = cake("train", "--rl", str(suite(tmp_path)), "--name", "tiny", "--out",

@@ -106,6 +106,7 @@ class RayCluster:
             # Ray puts its own handlers on SIGINT and SIGTERM (a crash dump and an abort
             # 3 s after SIGTERM): the command's are put back, so a stop is one line and 130.
             handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+            alarm = signal.getsignal(signal.SIGALRM)
             try:
                 if self.address:
                     ray.init(address=self.address, **kwargs)
@@ -117,13 +118,19 @@ class RayCluster:
                 where = self.address or "a local instance"
                 first = (str(e).strip().splitlines() or [type(e).__name__])[0]
                 raise InputError(f"--ray {where}: cannot start or join Ray ({first})") from None
-            except BaseException:  # an interrupt while it starts
+            except BaseException as e:  # an interrupt while it starts
+                # A SIGTERM in there met Ray's handlers: its C++ one armed an abort 3 s on
+                # (the real-time timer, SIGALRM) and its Python one raised SystemExit(15).
+                signal.setitimer(signal.ITIMER_REAL, 0)
                 ray.shutdown()
                 self._remove_folder()
+                ours = handlers.get(signal.SIGTERM)
+                if isinstance(e, SystemExit) and e.code == signal.SIGTERM and callable(ours):
+                    ours(signal.SIGTERM, None)  # the command's own: stopped by SIGTERM, 130
                 raise
             finally:
                 if threading.current_thread() is threading.main_thread():
-                    for s, handler in handlers.items():
+                    for s, handler in (*handlers.items(), (signal.SIGALRM, alarm)):
                         signal.signal(s, handler)
             self._started = True
         return ray
