@@ -455,7 +455,8 @@ def test_the_release_is_drawn_for_a_skill_that_decides_its_gripper(tmp_path):
     assert r.returncode == 2 and "decides no gripper" in r.stdout, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "no.png").exists()
     r = bench("--release", str(tmp_path / "no.png"), "--skills", str(tmp_path / "none"))
-    assert r.returncode == 2 and "none: no such folder (a learned part" in r.stdout, r.stdout + r.stderr
+    missing = "none: no such folder (a learned part"
+    assert r.returncode == 2 and missing in r.stdout, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and not (tmp_path / "no.png").exists()
     r = bench("--release", str(tmp_path))  # onto a folder: refused before the episode
     assert r.returncode == 2 and "is a folder, not a regular file" in r.stdout, r.stdout
