@@ -122,7 +122,7 @@ python:
 run: python system-packages-run $(BYTECODE)
 	$(PY) -m cake_drake.run --mode torque
 
-# The oldest supported pair, for tests/test_setup.py's run of the main job there: made
+# The oldest supported pair, for tests/contracts/test_setup.py's run of the main job there: made
 # where a Python 3.11 is found (nothing to do elsewhere; the test says it was skipped).
 OLDEST_STAMP := $(OLDEST)/.installed-$(OLDEST_DRAKE)
 oldest:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from hypothesis import HealthCheck, given, settings
 
-# The suite's own mutations (tests/test_hardening.py), run here by the ten thousand: the
+# The suite's own mutations (tests/contracts/test_hardening.py), run here by the ten thousand: the
 # one benchmark that reads the tests' folder.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 from test_hardening import EXIT_CODES, PLAN_5, TRANSCRIPT, mutated

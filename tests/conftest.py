@@ -1,4 +1,5 @@
-"""Shared fixtures: one recorded reference trajectory for the whole session."""
+"""Shared fixtures: one recorded reference trajectory for the whole session (the shared
+helpers are in ``tests/helpers.py``)."""
 
 from __future__ import annotations
 
@@ -6,18 +7,6 @@ import pytest
 
 from cake_drake.pipeline import run
 from cake_drake.scenario import JointPd, Scenario
-
-
-def scenario(mode: str = "torque", problem=None, **outputs) -> Scenario:
-    """The exercise's scenario with the shipped controller ``mode`` and, if given, a problem."""
-    from cake_drake.scenario import controller_for_mode
-
-    s = Scenario(controller=controller_for_mode(mode))
-    if problem is not None:
-        s.task.problem = str(problem)
-    for key, value in outputs.items():
-        setattr(s.outputs, key, value)
-    return s
 
 
 @pytest.fixture(scope="session")

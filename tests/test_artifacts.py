@@ -6,14 +6,13 @@ from __future__ import annotations
 
 import re
 import shutil
-from pathlib import Path
 
 import pytest
 
 from cake_drake import artifacts
 from cake_drake.errors import InputError
+from tests.helpers import ROOT
 
-ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "models"
 
 

@@ -193,7 +193,7 @@ def _no_image_embedding():
     (about 2 ms a frame), which only changes features of dtype ``image``. Ours are state
     and video: the step is skipped while we write (half the writer's time), and LeRobot's
     writer is otherwise unchanged: the same tables and features, less the map's cache
-    fingerprint in the schema's metadata (tests/test_record.py checks it)."""
+    fingerprint in the schema's metadata (tests/learning/test_record.py checks it)."""
     from lerobot.datasets import dataset_writer  # lerobot: seconds, an extra
 
     embed = dataset_writer.embed_images

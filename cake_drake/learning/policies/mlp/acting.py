@@ -5,8 +5,8 @@ skills needs the perceptron's forward pass and its action queue, nothing else; i
 torch for it costs more than the whole classical run (about 620 MB and 1.4 s on these
 machines, against 290 MB and 1.4 s for a whole run). :class:`NumpyChunks` reads the same
 checkpoint files (``config.json``, ``model.safetensors``) and does the same arithmetic as
-:class:`cake_drake.learning.policies.mlp.network.Chunks` (tests/test_mlp.py compares them); a
-policy that sees keeps torch (its convolutions).
+:class:`cake_drake.learning.policies.mlp.network.Chunks` (tests/learning/test_mlp.py
+compares them); a policy that sees keeps torch (its convolutions).
 """
 
 from __future__ import annotations
