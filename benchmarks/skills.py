@@ -29,6 +29,11 @@ and the failures by their first words; ``--json`` keeps the rows.
     python benchmarks/skills.py --skills package://cake_drake/policies/skills_joint_space \
         --no-classical   # the joint-space skills, the comparison
     python benchmarks/skills.py --release docs/images/skill_release.png   # the release, drawn
+    python benchmarks/skills.py --alone --no-classical --rows problem_5   # the network alone
+
+``--alone`` adds a column of the network alone (``motion.skill_rules: []``), ``--each-off``
+one for each shield step off in turn; a second table says how often each step changed
+the network's answer.
 
 ``--release PNG`` draws, instead of the table, the gripper's decision over one held-out
 put-down (``CakeDrake/Skill-v0`` on a generated problem, seed ``--seed``): the head's
@@ -61,9 +66,9 @@ def rows_named(sizes, tall) -> list[str]:
             "learned_cake"]  # fmt: skip
 
 
-def scenario_for(row: str, skills: str, seed: int):
+def scenario_for(row: str, skills: str, seed: int, rules=None):
     """The episode's scenario: ``row``'s problem and world, ``skills`` as the geometric
-    layer (empty: the classical one)."""
+    layer (empty: the classical one), ``rules`` its shield's steps (None: every one)."""
     from cake_drake.scenario import Generate, load_scenario
 
     s = load_scenario(SUITE, "learned_cake" if row == "learned_cake" else "learned_tower5")
@@ -75,25 +80,32 @@ def scenario_for(row: str, skills: str, seed: int):
         s.task.problem = ""
         s.world.placement.xy = s.world.placement.yaw_deg = 0.0
     s.motion.skills = skills
+    if rules is not None:
+        s.motion.skill_rules = list(rules)
     return s
 
 
 def episode(job) -> dict:
     """One whole run (in a worker): its row of the table."""
-    row, column, skills, seed = job
+    row, column, skills, seed, rules = job
     from cake_drake.errors import CakeDrakeError
     from cake_drake.pipeline import run
 
     t0 = time.perf_counter()
     places: list[float] = []
+    changed, periods = {}, 0
     try:
-        result = run(scenario_for(row, skills, seed), write=False)
+        result = run(scenario_for(row, skills, seed, rules), write=False)
         ok, message, sim_s = result.success, result.message, result.execution.sim_s
         places = [p["offset_mm"] for p in result.execution.monitoring.get("places", [])]
+        used = result.execution.monitoring.get("skills", {})
+        changed = {k: v["changed"] for k, v in used.get("shield", {}).items()}
+        periods = used.get("steps", 0)
     except CakeDrakeError as e:
         ok, message, sim_s = False, str(e), 0.0
     return {"row": row, "column": column, "seed": seed, "success": ok, "message": message,
-            "sim_s": sim_s, "places_mm": places, "wall_s": time.perf_counter() - t0}  # fmt: skip
+            "sim_s": sim_s, "places_mm": places, "wall_s": time.perf_counter() - t0,
+            "shield_changed": changed, "periods": periods}  # fmt: skip
 
 
 def main(argv=None) -> int:
@@ -115,6 +127,14 @@ def main(argv=None) -> int:
         metavar="PNG",
         help="draw the gripper's decision over one held-out put-down instead",
     )
+    ap.add_argument(
+        "--alone",
+        action="store_true",
+        help="a column of the network alone (motion.skill_rules: [])",
+    )
+    ap.add_argument(
+        "--each-off", action="store_true", help="a column for each shield step off in turn"
+    )
     ap.add_argument("--dev", action="store_true", help="the development seeds, 100000 and up")
     ap.add_argument("--seed", type=int, default=DEV_SEED, help="--release's put-down")
     args = ap.parse_args(argv)
@@ -122,11 +142,20 @@ def main(argv=None) -> int:
     if args.release:
         return release(args.skills, args.seed, args.release)
     rows = args.rows or rows_named(args.sizes, args.tall)
-    columns = [("learned skills", args.skills)] + ([] if args.no_classical else
-                                                   [("classical", "")])  # fmt: skip
+    from cake_drake.policy.shield import DEFAULT
+
+    columns = [("learned skills", args.skills, None)]
+    if args.alone:
+        columns.append(("the network alone", args.skills, []))
+    if args.each_off:
+        columns += [(f"without {n}", args.skills, [m for m in DEFAULT if m != n])
+                    for n in DEFAULT]  # fmt: skip
+    if not args.no_classical:
+        columns.append(("classical", "", None))
     first = DEV_SEED if args.dev else TEST_SEED
     seeds = range(first, first + args.episodes)
-    jobs = [(row, name, path, s) for row in rows for name, path in columns for s in seeds]
+    jobs = [(row, name, path, s, rules) for row in rows for name, path, rules in columns
+            for s in seeds]  # fmt: skip
     t0 = time.perf_counter()
     done = list(imap(episode, jobs, args.workers))
     which = "development" if args.dev else "test"
@@ -137,7 +166,7 @@ def main(argv=None) -> int:
           "| sim s | failures |")  # fmt: skip
     print("|---|---|---|---|---|---|---|")
     for row in rows:
-        for name, _ in columns:
+        for name, _, _ in columns:
             mine = [d for d in done if d["row"] == row and d["column"] == name]
             wins = sum(d["success"] for d in mine)
             lo, hi = wilson(wins, len(mine))
@@ -149,9 +178,29 @@ def main(argv=None) -> int:
             said = "; ".join(f"{n}× {w}" for w, n in fails.most_common(2)) or "-"
             print(f"| {row} | {name} | {wins}/{len(mine)} | {100 * lo:.0f}-{100 * hi:.0f} % "
                   f"| {said_places} | {sim:.1f} | {said} |", flush=True)  # fmt: skip
+    shield_table(done, rows, [c for c in columns if c[1]])
     if args.json:
         args.json.write_text(json.dumps(done, indent=1) + "\n")
     return 0
+
+
+def shield_table(done, rows, columns) -> None:
+    """How often each shield step changed the network's answer, per 100 control periods
+    of the skill, over a row's episodes."""
+    from cake_drake.policy.shield import DEFAULT
+
+    print("\nShield steps: the network's answer changed, per 100 control periods\n")
+    print("| row | geometric layer | periods | " + " | ".join(DEFAULT) + " |")
+    print("|---|---|---|" + "---|" * len(DEFAULT))
+    for row in rows:
+        for name, _, _ in columns:
+            mine = [d for d in done if d["row"] == row and d["column"] == name]
+            periods = sum(d["periods"] for d in mine)
+            cells = []
+            for step in DEFAULT:
+                n = [d["shield_changed"][step] for d in mine if step in d["shield_changed"]]
+                cells.append(f"{100 * sum(n) / max(periods, 1):.1f}" if n else "off")
+            print(f"| {row} | {name} | {periods} | " + " | ".join(cells) + " |")
 
 
 def release(skills: str, seed: int, png: Path) -> int:

@@ -96,13 +96,14 @@ class ReferenceSource:
                 "checkpoint": self.geometric.label,
                 "actions_ended": prog.done,
                 "effects_held": prog.succeeded,
-                "budget_ran_out": prog.timed_out - prog.stalled,
+                "budget_ran_out": prog.ran_out,
                 "stood_still": prog.stalled,
                 "steps": prog.total_steps,
                 "budget_steps": self.geometric.budget,
                 "action_space": self.geometric.space,
                 "clipped": self.geometric.counts.clipped,
                 "unreachable": self.geometric.counts.unreachable,
+                "shield": self.geometric.shield_summary(),
             }
         return found
 
@@ -303,6 +304,7 @@ def _add_skills(builder, scenario, scene, indices, q_start, meaning, skill=None)
         motion.waypoints,
         ik=DlsIk(Kinematics(scene.control_plant), max_iterations=50),
         smooth_s=motion.skill_smooth_s,
+        rules=motion.skill_rules,
     )
     return builder.AddNamedSystem("skills", system)
 

@@ -25,6 +25,7 @@ from cake_drake.execution import Execution, ProgressBar, execute
 from cake_drake.outputs.files import check_output_folder
 from cake_drake.perception.settings import check_perception
 from cake_drake.plugins import PluginError, is_plugin, load_attribute, resolve
+from cake_drake.policy.shield import check_names as check_shield_steps
 from cake_drake.scenario import (
     CHECKPOINT_CHECK,
     CHECKPOINT_POLICY,
@@ -341,6 +342,10 @@ def check_skill_settings(motion) -> None:
     _range(motion.skill_smooth_s, 0.0, 5.0, "motion.skill_smooth_s", " s")
     _range(motion.skill_ensemble, 0.0, 10.0, "motion.skill_ensemble")
     _range(motion.skill_max_steps, 0, 1_000_000, "motion.skill_max_steps")
+    try:
+        check_shield_steps(motion.skill_rules)
+    except ValueError as e:
+        raise InputError(str(e)) from None
 
 
 def check_skills(motion) -> None:

@@ -89,6 +89,13 @@ class Task:
     time_limit: float | None = None  # s, for the planner
 
 
+def _shield_steps() -> list[str]:
+    """Every step of the learned skills' shield (imported when a scenario is made)."""
+    from cake_drake.policy.shield import DEFAULT
+
+    return list(DEFAULT)
+
+
 @dataclass
 class Motion:
     """The geometric layer: IK, timing, waypoints and what to do about collisions."""
@@ -125,6 +132,9 @@ class Motion:
     #: weighted exp(-skill_ensemble * i) (i = 0 the oldest); 0: a chunk's first actions
     #: executed open loop, then a new chunk (how the skills were trained).
     skill_ensemble: float = 0.01
+    #: The shield's steps around the skill's network, by name, in the order they run
+    #: within their phase (cake_drake.policy.shield.STEPS); ``[]``: the network alone.
+    skill_rules: list[str] = field(default_factory=lambda: _shield_steps())
 
 
 @dataclass

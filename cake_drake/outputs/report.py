@@ -72,7 +72,10 @@ def layers(scenario, plan) -> dict:
         elif motion.skills:  # what the skills read and answer, said by their adapter
             describe = load_attribute(SKILL_DESCRIBE, "skill")
             how = describe(resolve_path(motion.skills))
-            geometric = {"kind": "learned", "what": f"skills, {how} ({motion.skills})"}
+            rules = list(motion.skill_rules)
+            shield = f"shield of {len(rules)} steps" if rules else "the network alone, no shield"
+            what = f"skills, {how}, {shield} ({motion.skills})"
+            geometric = {"kind": "learned", "what": what, "shield": rules}
         else:
             moves = f"waypoints, IK ({motion.ik}), {motion.planner} moves"
             geometric = {"kind": "classical", "what": moves}

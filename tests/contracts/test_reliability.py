@@ -164,9 +164,10 @@ def standing_skill(path, device, ensemble=0.0):
 
 
 def test_a_skill_whose_hand_stands_still_ends_its_try_there(monkeypatch, tmp_path):
-    """A hand stood still with its action not done ends its try after ``STALL_S``, not at
+    """A hand stood still with its action not done ends its try after ``STILL_END_S``, not at
     its budget: three tries of 2 s, not of 15, and the message and the summary say so."""
-    from cake_drake.systems.skills import DEFAULT_BUDGET, STALL_S
+    from cake_drake.policy.shield import STILL_END_S
+    from cake_drake.systems.skills import DEFAULT_BUDGET
 
     monkeypatch.setattr("cake_drake.scenario.SKILL_POLICY", f"{__name__}:standing_skill")
     monkeypatch.setattr("cake_drake.pipeline.SKILL_CHECK", f"{__name__}:_no_check")
@@ -177,10 +178,10 @@ def test_a_skill_whose_hand_stands_still_ends_its_try_there(monkeypatch, tmp_pat
     result = run(s, write=False)
     assert not result.success
     assert f"in 3 tries of {DEFAULT_BUDGET} steps each" in result.message, result.message
-    assert f"; the last ended with the hand still for {STALL_S:g} s" in result.message
+    assert f"; the last ended with the hand still for {STILL_END_S:g} s" in result.message
     skills = result.execution.monitoring["skills"]
     assert skills["stood_still"] == 3 and skills["budget_ran_out"] == 0
-    assert skills["steps"] < 3 * (STALL_S * 10 + 2)  # three stalls (10 Hz), no budget
+    assert skills["steps"] < 3 * (STILL_END_S * 10 + 2)  # three stalls (10 Hz), no budget
     assert result.execution.sim_s < 3 * DEFAULT_BUDGET / 10 / 2
 
 

@@ -493,7 +493,7 @@ def test_a_learning_tasks_episodes_carry_its_cubes_mass():
 
 
 def test_a_far_target_reads_as_a_near_one_in_its_direction(tmp_path):
-    """Format 4: a target further across than NEAR reads as if the hand were NEAR from it
+    """Format 4: a target further across than FAR_ACROSS reads as if the hand were that far from it
     on the line to it: two hands 40 cm and 70 cm from the same cube read the same
     numbers; what the fingers hold moves with the hand, a cube still to be picked does
     not; the skill's answer is then a heading near its target, and its move is taken
@@ -506,18 +506,18 @@ def test_a_far_target_reads_as_a_near_one_in_its_direction(tmp_path):
         v[4:7], v[8:11], v[12] = [far * 0.6, far * 0.8, -0.09], [far * 0.6, far * 0.8, 0.0], 0.0
         reads.append(rs.near_target(v))
     np.testing.assert_allclose(reads[0], reads[1], atol=1e-12)
-    np.testing.assert_allclose(reads[0][8:11], [rs.NEAR * 0.6, rs.NEAR * 0.8, 0.0])
-    np.testing.assert_allclose(reads[0][4:7], [rs.NEAR * 0.6, rs.NEAR * 0.8, -0.09])
+    np.testing.assert_allclose(reads[0][8:11], [rs.FAR_ACROSS * 0.6, rs.FAR_ACROSS * 0.8, 0.0])
+    np.testing.assert_allclose(reads[0][4:7], [rs.FAR_ACROSS * 0.6, rs.FAR_ACROSS * 0.8, -0.09])
     near = pick.copy()
     near[4:6] = near[8:10] = [0.03, 0.04]
-    np.testing.assert_array_equal(rs.near_target(near), near)  # within NEAR: as it is
+    np.testing.assert_array_equal(rs.near_target(near), near)  # within FAR_ACROSS: as it is
     # A place: the held cube, 12 mm below the grasp frame, stays where it is in the hand.
     place = np.zeros(RELATIVE_SIZE)
     place[2], place[rs.WIDTH] = 1.0, 0.04
     place[4:7], place[8:11] = [0.0, 0.0, -0.012], [0.0, -0.5, -0.2]
     read = rs.near_target(place)
     np.testing.assert_allclose(read[4:7], place[4:7])
-    np.testing.assert_allclose(read[8:11], [0.0, -rs.NEAR, -0.2])
+    np.testing.assert_allclose(read[8:11], [0.0, -rs.FAR_ACROSS, -0.2])
     # In a run: the network answers from what it reads; the move from the real hand.
     skill = rs.RelativeSkill(write_skill(tmp_path / "s"))
     moves, _ = skill.forward(np.r_[read, read][None])

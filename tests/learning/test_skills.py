@@ -18,16 +18,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cake_drake.policy.shield import DEFAULT
 from tests.helpers import ROOT
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 SHIPPED = ROOT / "models" / "policies" / "skills"
 #: The skills that read the arm's joints, kept beside the shipped ones as the comparison.
 JOINT_SPACE = ROOT / "models" / "policies" / "skills_joint_space"
-#: What a run's layers say of the shipped skills (joint-space, a LeRobot checkpoint).
+#: What a run's layers say of the shipped skills with every shield step.
 DESCRIBED = (
     "imitation, reads the action from the hand (never the arm), answers hand moves "
-    "with IK below and a gripper decision"
+    "with IK below and a gripper decision, shield of 13 steps"
 )
 
 pytestmark = pytest.mark.slow
@@ -383,6 +384,7 @@ def test_each_layer_is_labelled_classical_or_learned():
     assert skills["geometric"] == {
         "kind": "learned",
         "what": f"skills, {DESCRIBED} (package://cake_drake/policies/skills)",
+        "shield": list(DEFAULT),
     }
     assert skills["dynamic"]["kind"] == "classical"
 

@@ -36,6 +36,7 @@ import numpy as np
 from cake_drake.errors import InputError
 from cake_drake.formats import check_format, read_npz
 from cake_drake.policy.observations import RELATIVE_SIZE
+from cake_drake.policy.shield import FAR_ACROSS
 
 #: What ``skill.json`` says a folder is.
 KIND = "relative_skill"
@@ -119,33 +120,23 @@ def target_from_hand(relative: np.ndarray, up_after_release: bool = True) -> np.
     return np.concatenate([xyz, yaw[..., None]], axis=-1)
 
 
-#: m: a target further across from the hand than this reads, to a format-4 network, as
-#: one this far, in its direction (:func:`near_target`).
-NEAR = 0.15
 #: m: a held cube's place further below it than this reads, to a format-4 network, as
 #: one this far below (:func:`near_target`).
 DEEP = 0.2
 
 
 def near_target(relative: np.ndarray, up_after_release: bool = True) -> np.ndarray:
-    """``observation.relative`` (14) as a format-4 network reads it in a run: a target
-    further across than ``NEAR`` read as if the hand were ``NEAR`` from it, on the line
-    to it, at the same height (what is in the fingers moves with the hand; the rest, the
-    target and a cube still to be picked, does not). Answered from the target, a move
-    across the table is the network's largest answer, the difference of two numbers of
-    decimetres, and on the scale it answers on, an error there grows as the move does:
-    from 73 cm, an unstack's answer pointed away from its cube, and the hand, further
-    each step, went on away. Read near, the answer is a heading near the target, where
-    the network is fine; the hand goes straight to it at the skill's step limit, across
-    at the height it is at, as the classical layer's transit. Likewise a held cube's
-    place further below it than ``DEEP`` reads as ``DEEP`` below: from the top of a
-    ten-cube tower, a put-down 32 cm below, further down than the demonstrations went,
-    was answered with a move up, and the hand rose out of reach. A copy."""
+    """``observation.relative`` (14) as a format-4 network reads it in a run, a copy: a
+    target further across than ``FAR_ACROSS`` (the shield's far) read as if the hand were
+    that far from it on the line to it, at the same height (what the fingers hold moves
+    with the hand; the target and a cube still to be picked do not), so the network
+    answers a heading near the target, where it is fine; a held cube's place further
+    below it than ``DEEP`` read as ``DEEP`` below, within the demonstrations' depths."""
     out = np.array(relative, np.float64)
     to = target_from_hand(out, up_after_release)
     far = float(np.hypot(*to[:2]))
-    if far > NEAR:
-        closer = to[:2] * (1.0 - NEAR / far)
+    if far > FAR_ACROSS:
+        closer = to[:2] * (1.0 - FAR_ACROSS / far)
         out[8:10] -= closer
         if out[WIDTH] > LET_GO:  # the fingers hold no cube: it stays where it is
             out[4:6] -= closer
