@@ -113,7 +113,7 @@ class Step:
         return " ".join((self.run.__doc__ or "").split())
 
 
-def _to(period: Period) -> np.ndarray:
+def _down_to(period: Period) -> np.ndarray:
     """Where the hand goes down to: a pick's cube, or where the hand is when a place's
     cube rests on its target."""
     cube = period.cubes[period.action.cube].translation()
@@ -199,7 +199,7 @@ def _across_to(p: Period) -> tuple[float, float]:
     """How far across the hand is from where it goes down to, and how close counts as
     over it (half a cube for a put-down's free spot, ``OVER_M`` otherwise)."""
     hand = p.X_WG.translation()
-    across = float(np.hypot(*(_to(p)[:2] - hand[:2])))
+    across = float(np.hypot(*(_down_to(p)[:2] - hand[:2])))
     putting_down = p.action.target is not None and p.action.other is None
     return across, (CUBE_SIZE / 2 if putting_down else OVER_M)
 
@@ -226,7 +226,7 @@ def descend_only_over_target(p: Period, a: Answer) -> Answer:
         return a
     action, hand, z = p.action, p.X_WG.translation(), a.base.translation()[2]
     start, end = hand[:2], a.base.translation()[:2] + np.asarray(a.move[:2], float)
-    floor = _to(p)[2]
+    floor = _down_to(p)[2]
     for name, X in p.cubes.items():
         at = X.translation()
         if name != action.cube and _across(at[:2], start, end) <= BESIDE_WAY_M:

@@ -67,6 +67,15 @@ def test_the_steps_are_named_documented_and_checked():
         shield.check_names("limit_finger_speed")
 
 
+def test_the_reference_lists_every_step_in_order_with_its_phase():
+    lines = (ROOT / "docs" / "reference.md").read_text().split("\n")
+    cells = [line.split(" | ") for line in lines if line.startswith("| `")]
+    rows = [c for c in cells if len(c) == 3 and c[1] in ("end", "observation", "action")]
+    assert [(c[0].strip("| `"), c[1]) for c in rows] == [
+        (step.name, step.phase) for step in shield.STEPS.values()
+    ]
+
+
 def test_a_still_hand_ends_its_try():
     hand = RigidTransform([0.5, 0.0, 0.2])
     pick = SimpleNamespace(cube="a", target=None, other=None)
