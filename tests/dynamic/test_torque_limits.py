@@ -60,7 +60,7 @@ def simulate(scenario: Scenario, seconds: float = 0.1):
 
 
 def test_a_users_controller_is_clamped_and_the_saturation_reported():
-    s = Scenario(controller=CustomController(factory="test_torque_limits:make_overdriving"))
+    s = Scenario(controller=CustomController(factory=f"{__name__}:make_overdriving"))
     logs = simulate(s)
     limits = np.array(TORQUE_LIMITS)
     np.testing.assert_allclose(np.abs(logs.tau_applied[1:]), np.tile(limits, (len(logs.t) - 1, 1)))
