@@ -169,6 +169,8 @@ class LearnedSkills(LeafSystem):
         if self.space == "ee_delta" and ik is None:
             raise ValueError("an ee_delta skill needs an ik (DlsIk) to turn moves into joints")
         self.ik, self.counts = ik, spaces.Counts()
+        #: The ee_delta space's bounds (low, high), which every answer is clipped to.
+        self._box = spaces.bounds("ee_delta", {}, None, None)
         #: The skill reads every yaw modulo a quarter turn (a cube's faces are alike), so
         #: the hand may take whichever quarter turn of its answer keeps the wrist mid-range.
         self._free_turns = bool(getattr(skill, "free_quarter_turns", False))
@@ -257,8 +259,7 @@ class LearnedSkills(LeafSystem):
         observation = self._observe(context, period, count=True)
         answer = self._ask(observation, prog)
         if self.space == "ee_delta":
-            low, high = spaces.bounds("ee_delta", {}, None, None)
-            move = np.clip(answer, low, high)
+            move = np.clip(answer, *self._box)
             self.counts.clipped += int(not np.array_equal(move, answer))
             shaped = self._shape(
                 period, Answer(move[:6], float(move[6]) * GRIPPER_MAX, X_WG, prog.wrist)
@@ -284,11 +285,10 @@ class LearnedSkills(LeafSystem):
         if self.space == "ee_delta":  # where the hand was last sent
             sent = self.ik.kin.pose(reference_target(self._groups, context)).translation()
         fingers = 2.0 * context.get_discrete_state(self._groups["finger_state"]).get_value()[0]
-        _, high = spaces.bounds("ee_delta", {}, None, None)
         return Period(
             prog.context, cubes, X_WG, float(hand[0] + hand[1]), self._params, self.period_s,
             fingers=fingers, sent=sent, still_s=prog.still * self.period_s,
-            max_turn=float(high[5]), free_turns=self._free_turns,
+            max_turn=float(self._box[1][5]), free_turns=self._free_turns,
         )  # fmt: skip
 
     def _ask(self, observation: dict, prog: SkillProgress) -> np.ndarray:
