@@ -18,6 +18,7 @@ import signal
 import socket
 import tempfile
 import threading
+import time
 from collections import deque
 from collections.abc import Iterator, Sequence
 
@@ -136,8 +137,14 @@ class RayCluster:
         return ray
 
     def _remove_folder(self) -> None:
+        """Remove the session folder; Ray's processes, stopping, may still write in it for
+        a moment, so it is removed again until it stays gone (at most 2 s)."""
         if self._folder is not None:
-            shutil.rmtree(self._folder, ignore_errors=True)
+            for _ in range(20):
+                shutil.rmtree(self._folder, ignore_errors=True)
+                if not os.path.exists(self._folder):
+                    break
+                time.sleep(0.1)
             self._folder = None
 
     def _reachable(self) -> None:
