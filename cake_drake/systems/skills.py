@@ -300,10 +300,10 @@ class LearnedSkills(LeafSystem):
         size = SKILL_SPACES[self.space]
         try:
             answer = np.asarray(raw, float).reshape(-1)
-            shown = np.array2string(answer, precision=3)
         except (TypeError, ValueError):  # not numbers at all
-            answer, shown = np.empty(0), repr(raw)
-        if answer.shape != (size,) or not np.all(np.isfinite(answer)):
+            answer = None
+        if answer is None or answer.shape != (size,) or not np.all(np.isfinite(answer)):
+            shown = repr(raw) if answer is None else np.array2string(answer, precision=3)
             what = (
                 "7 joint targets, the gripper's width"
                 if size == 8
