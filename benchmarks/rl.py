@@ -41,6 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 LEARNING = ROOT / "models" / "scenarios" / "learning.yaml"
 PIXELS = ROOT / "models" / "policies" / "stack2_pixels"
+SKILL_ID = "cake_drake.gym:CakeDrake/Skill-v0"
 
 
 def _spec(cameras: bool):
@@ -108,43 +109,102 @@ def throughput(steps: int) -> None:
     skill_throughput(steps)
 
 
-def skill_throughput(steps: int) -> None:
-    """CakeDrake/Skill-v0 (the shipped relative skill's places on 3 to 8 cubes), each step
-    answered by the skill itself: in one process, and in make_vec with two processes.
-    Resets (the lead skill doing the actions before a place) are counted in the time."""
+def _skill_env(pool: str = ""):
     import gymnasium
 
-    from cake_drake.learning.policies.relative_skill import RelativeSkill
+    from cake_drake.learning.envs.skill_env import SkillEnv
 
-    skill_id = "cake_drake.gym:CakeDrake/Skill-v0"
+    return SkillEnv(starts=pool) if pool else gymnasium.make(SKILL_ID).unwrapped
+
+
+class _Answered:
+    """One Skill-v0 with the relative skill answering it: the steps of a row."""
+
+    def __init__(self, env) -> None:
+        from cake_drake.learning.policies.relative_skill import RelativeSkill
+
+        self.env, self.skill = env, RelativeSkill(env.skill_path)
+
+    def answer(self, obs):
+        return self.skill.act({"observation.relative": obs})
+
+    def ended(self) -> None:
+        self.skill.reset()
+
+
+def skill_throughput(steps: int, pool_size: int = 40) -> None:
+    """CakeDrake/Skill-v0 (the shipped relative skill's places on 3 to 8 cubes), each step
+    answered by the skill itself, resets counted in the time: every start replayed (one
+    process), then from a start pool of ``pool_size`` starts (recorded first, its time
+    printed) in one process, in make_vec with two processes and on two Ray actors."""
+    import tempfile
+
+    import gymnasium
+
+    from cake_drake.learning.envs import starts
+
     print(f"CakeDrake/Skill-v0, places of 3 to 8 cubes, the skill's own answers, {steps} steps "
           "a row (resets included)")  # fmt: skip
-    env = gymnasium.make(skill_id)
-    lead = RelativeSkill(env.unwrapped.skill_path)
-    obs, _ = env.reset(seed=1)
-    t0, episodes = time.perf_counter(), 0
-    for k in range(steps):
-        obs, _, term, trunc, _ = env.step(lead.act({"observation.relative": obs}))
-        if term or trunc:
-            obs, _ = env.reset(seed=2 + k)
-            lead.reset()
-            episodes += 1
-    rate = steps / (time.perf_counter() - t0)
-    print(f"  {'relative skill':<22} one process      {rate:7.0f} steps/s ({episodes} episodes)")
-    venv = gymnasium.make_vec(skill_id, num_envs=2, vectorization_mode="async",
-                              vector_kwargs={"context": "spawn"})  # fmt: skip
-    leads = [RelativeSkill(env.unwrapped.skill_path) for _ in range(2)]
-    obs, _ = venv.reset(seed=1)
+    env = _skill_env()
+    t0 = time.perf_counter()
+    pool = env.record(pool_size, seed=1000)
+    took = time.perf_counter() - t0
+    problems = len({(s.seed, s.blocks) for s in pool})
+    folder = tempfile.mkdtemp()
+    path = str(Path(folder) / "starts.json")
+    starts.write(path, starts.settings_of(env), env.skill_digest, pool)
+    print(f"  a pool of {pool_size} starts of {problems} problems recorded in {took:.1f} s")
+    for label, made in (("replayed starts", env), ("start pool", _skill_env(path))):
+        one = _Answered(made)
+        obs, _ = made.reset(seed=1)
+        t0, episodes = time.perf_counter(), 0
+        for k in range(steps):
+            obs, _, term, trunc, _ = made.step(one.answer(obs))
+            if term or trunc:
+                obs, _ = made.reset(seed=2 + k)
+                one.ended()
+                episodes += 1
+        rate = steps / (time.perf_counter() - t0)
+        print(f"  {label:<22} one process      {rate:7.0f} steps/s ({episodes} episodes)")
+    venv = gymnasium.make_vec(SKILL_ID, num_envs=2, vectorization_mode="async",
+                              vector_kwargs={"context": "spawn"}, starts=path)  # fmt: skip
+    print(f"  {'start pool':<22} make_vec x 2     {_vector_rate(venv, steps):7.0f} steps/s")
+    venv.close()
+    from functools import partial
+
+    from cake_drake.learning.envs.ray_runners import ray_vec_env
+    from cake_drake.sweeps import RayCluster
+
+    cluster = RayCluster(num_cpus=2)
+    cluster.start()
+    try:
+        venv = ray_vec_env(partial(_skill_env, path), 2, cluster)
+        print(f"  {'start pool':<22} Ray actors x 2   {_vector_rate(venv, steps, sb3=True):7.0f} "
+              "steps/s")  # fmt: skip
+        venv.close()
+    finally:
+        cluster.stop()
+
+
+def _vector_rate(venv, steps: int, sb3: bool = False) -> float:
+    """Steps a second of two environments stepped together, the relative skill answering."""
+    from cake_drake.learning.envs.skill_env import DEFAULT_SKILL
+    from cake_drake.learning.policies.relative_skill import RelativeSkill
+
+    skills = [RelativeSkill(DEFAULT_SKILL) for _ in range(2)]
+    obs = venv.reset() if sb3 else venv.reset(seed=1)[0]
     t0 = time.perf_counter()
     for _ in range(steps // 2):
-        pairs = zip(leads, obs, strict=True)
+        pairs = zip(skills, obs, strict=True)
         action = np.stack([s.act({"observation.relative": o}) for s, o in pairs])
-        obs, _, term, trunc, _ = venv.step(action)
-        for k in np.flatnonzero(term | trunc):
-            leads[k].reset()
-    rate = 2 * (steps // 2) / (time.perf_counter() - t0)
-    venv.close()
-    print(f"  {'relative skill':<22} make_vec x 2     {rate:7.0f} steps/s")
+        if sb3:
+            obs, _, ended, _ = venv.step(action)
+        else:
+            obs, _, term, trunc, _ = venv.step(action)
+            ended = term | trunc
+        for k in np.flatnonzero(ended):
+            skills[k].reset()
+    return 2 * (steps // 2) / (time.perf_counter() - t0)
 
 
 def runners(steps: int) -> None:
@@ -267,6 +327,8 @@ def figure(folders: list[Path], path: Path, bases: dict[str, float], window: int
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--throughput", action="store_true")
+    p.add_argument("--skill-throughput", action="store_true",
+                   help="CakeDrake/Skill-v0's rows of --throughput alone")  # fmt: skip
     p.add_argument("--steps", type=int, default=400, help="--throughput/--runners: steps a row")
     p.add_argument("--runners", action="store_true")
     p.add_argument("--compare", type=Path, nargs="+", metavar="DIR", default=[])
@@ -278,6 +340,8 @@ def main() -> None:
     print(machine())
     if args.throughput:
         throughput(args.steps)
+    elif args.skill_throughput:
+        skill_throughput(args.steps)
     if args.runners:
         runners(args.steps)
     if args.compare:

@@ -260,6 +260,9 @@ class RlRecipe:
     algorithm: str = "ppo"  # ppo | sac
     #: Environment steps in all (every environment's together).
     steps: int = 100_000
+    #: A wall-clock budget: the training stops at the first step past it, even short of
+    #: ``steps`` (0: none). Two recipes compared at equal time set the same.
+    minutes: float = 0.0
     #: Environments stepped side by side (Gymnasium's make_vec; 1: in this process).
     envs: int = 2
     #: A frozen policy's checkpoint the learner corrects (a residual); empty: from scratch.
@@ -284,6 +287,10 @@ class RlRecipe:
     #: places, without exploration; the best check's model is the one kept.
     eval_every: int = 0
     eval_episodes: int = 20
+    #: A skill residual's start pool (``python -m cake_drake.record SPEC --starts FILE``):
+    #: its episodes start from the pool's states, nothing replayed; empty: each start
+    #: replays the base's actions before its place. Held-out checks always replay.
+    starts: str = ""
     reward: Reward = field(default_factory=Reward)
 
 

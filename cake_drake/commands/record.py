@@ -43,6 +43,12 @@ on the rotations (their bounds' ratio), SIGMA at most 0.05 (a step's bound); the
 is never noised; joint_chunk is not recorded. Success is measured from the poses as ever:
 only episodes that reach the goal are kept. The noise is in report.json.
 
+--starts FILE records a start pool for a skill residual's task (training.rl with a base
+that never sees the arm, as skills_rl): --episodes starts, each the Diagram's whole state
+where the base skill began a place in a run of the task's problems (seeds from the
+scenario's seed on), one JSON file written whole; training.rl.starts: FILE then starts
+CakeDrake/Skill-v0's episodes there, nothing replayed. FILE must not exist yet.
+
 --replay DATASET feeds every episode's actions (a noisy recording's executed ones), open
 loop, through the same environment from the same seed and reports how many build the
 goal again.
@@ -50,8 +56,9 @@ goal again.
 Needs lerobot: pip install 'cake_drake[lerobot]'. Exit codes: 0 done; 2 bad input (no
 lerobot, a folder holding another recording without --resume, --resume with another
 action space, rate, cameras, task or noise, an action space that cannot be recorded,
---noise negative, not a number or above its bound, a dataset missing a file); 3 a policy
-plug-in failed; 4 the dataset could not be written; 130 interrupted (finished episodes are kept).
+--noise negative, not a number or above its bound, a dataset missing a file; with
+--starts, a FILE that exists or a task that is no skill residual's); 3 a policy plug-in
+failed, or the lead skill gave most runs up; 4 the dataset or the pool could not be written; 130 interrupted (finished episodes are kept).
 """
 
 
@@ -82,6 +89,10 @@ def record_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--resume", action="store_true", help="continue an interrupted recording")
     p.add_argument("--replay", type=Path, metavar="DATASET", help="replay a dataset's actions")
+    p.add_argument(
+        "--starts", type=Path, metavar="FILE",
+        help="record a start pool for a skill residual's task (--episodes starts)",
+    )  # fmt: skip
     add_set_flag(p, "the scenario")
     return p
 
@@ -103,6 +114,8 @@ def main_record(argv: list[str] | None = None) -> int:
             "when their actions are replayed open loop"
         )
         return EXIT_OK
+    if args.starts is not None:
+        return _record_starts(args)
     if args.spec is None or args.out is None:
         raise InputError("record: give a scenario file and --out DATASET (or --replay DATASET)")
     if not 1 <= args.episodes <= 100_000:
@@ -127,5 +140,28 @@ def main_record(argv: list[str] | None = None) -> int:
         f"({report['frames']} frames at {report['fps']:g} Hz, {spec.control_mode}{noise}, "
         f"cameras {', '.join(report['cameras']) or 'none'}); {len(report['failed'])} failed "
         "(listed in report.json)"
+    )
+    return EXIT_OK
+
+
+def _record_starts(args) -> int:
+    from cake_drake.learning.training.skill_rl import record_starts
+    from cake_drake.scenario import load_scenario
+
+    if args.spec is None:
+        raise InputError("record --starts FILE: give the scenario file of a skill residual's task")
+    if args.out is not None:
+        raise InputError("record --starts FILE writes FILE: give no --out")
+    if args.starts.exists():
+        raise InputError(f"--starts {args.starts}: exists; give a path to a new file")
+    if not args.starts.parent.is_dir():
+        raise InputError(f"--starts {args.starts}: no folder {args.starts.parent} to write it in")
+    if not 1 <= args.episodes <= 2_000:
+        raise InputError(f"--episodes {args.episodes}: starts in the pool, from 1 to 2000")
+    scenario = load_scenario(args.spec, args.name, args.set)
+    written = record_starts(scenario, args.name or str(args.spec), args.starts, args.episodes)
+    print(
+        f"{args.starts}: {written} starts for CakeDrake/Skill-v0 (training.rl.starts: "
+        f"{args.starts})"
     )
     return EXIT_OK

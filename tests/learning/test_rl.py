@@ -212,6 +212,19 @@ def test_a_bad_reward_in_a_recipe_is_refused_with_its_line(tmp_path, reward, wor
     assert not (tmp_path / "o").exists()
 
 
+def test_a_wall_clock_budget_stops_the_training_short_of_its_steps(tmp_path):
+    text = TINY.format(base="").replace("steps: 128", "steps: 99968\n      minutes: 0.05")
+    (tmp_path / "tiny.yaml").write_text(text)
+    r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "o", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    info = json.loads((tmp_path / "o" / "rl.json").read_text())
+    assert 1 <= info["steps"] < 99968 and info["recipe"]["minutes"] == 0.05, info["steps"]
+    (tmp_path / "bad.yaml").write_text(text.replace("minutes: 0.05", "minutes: -1"))
+    r = cake("train", "--rl", "bad.yaml", "--name", "tiny", "--out", "b", cwd=tmp_path)
+    one_line(r, 2, "training.rl.minutes = -1.0: a number from 0.0 to 10000.0")
+    assert not (tmp_path / "b").exists()
+
+
 def test_rl_flags_without_rl_and_rl_with_a_dataset_are_refused(tmp_path):
     r = cake("train", str(tmp_path), "--out", str(tmp_path / "o"), "--base", "x")
     one_line(r, 2, "--base without --rl")

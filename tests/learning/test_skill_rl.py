@@ -41,6 +41,7 @@ tiny:
       log_std: -1.0
       eval_every: 64
       eval_episodes: 2
+      starts: "{starts}"
       reward: {{goal: 1.0, success: 5.0, place: 0.05, step: -0.05, lost: -10.0}}
 """
 
@@ -54,7 +55,11 @@ def cake(command: str, *args: str, cwd: Path = ROOT):
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("skill_rl")
-    (folder / "tiny.yaml").write_text(TINY.format(skill=SKILL))
+    (folder / "tiny.yaml").write_text(TINY.format(skill=SKILL, starts="pool.json"))
+    r = cake("record", "tiny.yaml", "--name", "tiny", "--starts", "pool.json",
+             "--episodes", "3", cwd=folder)  # fmt: skip
+    assert r.returncode == 0 and "pool.json: 3 starts for CakeDrake/Skill-v0" in r.stdout, r.stderr
+    # the training's episodes start from the pool; its held-out checks replay
     r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "out", cwd=folder)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "skill + RL residual (PPO) on tiny, 128 steps" in r.stdout, r.stdout
@@ -68,6 +73,7 @@ def test_a_short_ppo_run_writes_its_folder_with_held_out_checks(trained):
     )
     info = json.loads((out / skill_rl.FILE).read_text())
     assert info["kind"] == "skill_residual" and info["steps"] == 128
+    assert info["recipe"]["starts"] == "pool.json" and "pool.json" in info["episodes_of"]
     assert info["base"]["path"] == "package://cake_drake/policies/skills"
     assert info["base"]["sha256"] == skill_rl.digest(SKILL)
     # checks at 0 (the base alone), 64 and 128, each on the same two held-out places
@@ -129,10 +135,21 @@ def test_a_residual_for_another_base_is_refused_before_simulating(trained, tmp_p
     assert not (tmp_path / "run").exists()
 
 
+def test_a_pool_of_another_skill_is_refused_before_anything_trains(trained, tmp_path):
+    body = json.loads((trained / "pool.json").read_text())
+    body["skill_digest"] = "0" * 64
+    (tmp_path / "pool.json").write_text(json.dumps(body))
+    (tmp_path / "tiny.yaml").write_text(TINY.format(skill=SKILL, starts="pool.json"))
+    r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "out", cwd=tmp_path)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert "pool.json: drawn with another lead skill" in r.stderr
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_skill_residual_on_a_skill_that_reads_the_arm_is_refused(tmp_path):
     joint = ROOT / "models" / "policies" / "skills_joint_space"
     (tmp_path / "tiny.yaml").write_text(
-        TINY.format(skill=SKILL).replace(f'base: "{SKILL}"', f'base: "{joint}"')
+        TINY.format(skill=SKILL, starts="").replace(f'base: "{SKILL}"', f'base: "{joint}"')
     )
     r = cake("train", "--rl", "tiny.yaml", "--name", "tiny", "--out", "out", cwd=tmp_path)
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr

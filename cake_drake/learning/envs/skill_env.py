@@ -38,6 +38,12 @@ tries), or takes more than ``LEAD_PERIODS`` control periods an action to reach i
 draw thrown away, and ``reset`` draws again (at most ``MAX_DRAWS`` times): the starts
 are those of the lead's runs that go well.
 
+With ``starts`` (a start pool, :mod:`cake_drake.learning.envs.starts`; ``python -m
+cake_drake.record SPEC --starts FILE`` writes one, :meth:`SkillEnv.start` gives the
+current episode's), ``reset`` draws one of the pool's starts and puts the Diagram's
+state back there: nothing is replayed, and the episode is the one the replayed start
+gave, number for number. The Diagrams of the last ``BUILT`` problems stay built.
+
     import gymnasium
     env = gymnasium.make("cake_drake.gym:CakeDrake/Skill-v0", blocks=(3, 6))
 """
@@ -50,11 +56,12 @@ from dataclasses import replace
 import gymnasium
 import numpy as np
 from gymnasium import spaces as gs
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import InitializeParams, Simulator
 
 from cake_drake.diagram import build_diagram
 from cake_drake.errors import ExecutionError, InputError
 from cake_drake.learning.envs import rewards
+from cake_drake.learning.envs import starts as start_pool
 from cake_drake.learning.envs.env import _blocks, set_world
 from cake_drake.paths import MODELS_DIR, resolve_path
 from cake_drake.pipeline import check, plan_and_layout
@@ -77,6 +84,10 @@ MAX_DRAWS = 20
 #: Control periods the lead may take, on average, for each action before the chosen one
 #: (a pick or a place of the lead's takes 40 to 50): past them, the draw is given up.
 LEAD_PERIODS = 80
+#: The Diagrams of a start pool's problems an environment keeps built, the most recently
+#: restored (about 16 MB each with up to eight cubes): a pool's problems are few, so
+#: most resets build nothing.
+BUILT = 64
 #: A cube this far below the table's top has left the table.
 LOST_Z = -0.05
 
@@ -145,6 +156,7 @@ class SkillEnv(gymnasium.Env):
         time_step: float = 0.01,
         planner: str = "learned",
         horizon: int = 6,
+        starts: str = "",
     ) -> None:
         from cake_drake.learning.policies import skills
 
@@ -191,6 +203,23 @@ class SkillEnv(gymnasium.Env):
         # The same check a run gets, before make() returns: field names as a scenario's.
         check(self._scenario(0, self.blocks[0]), write=False)
         self._simulator = None
+        self._problem, self._first = None, None
+        self._built: dict[tuple[int, int], tuple] = {}  # a pool's problems' Diagrams
+        self.skill_digest = start_pool.digest(self.skill_path)
+        self.starts = str(resolve_path(starts)) if starts else ""
+        self._pool = (
+            start_pool.read(self.starts, start_pool.settings_of(self), self.skill_digest,
+                            self.skill_path) if starts else []
+        )  # fmt: skip
+        memory = set(getattr(self._lead, "MEMORY", ()))
+        for k, start in enumerate(self._pool):
+            if start.lead is not None and set(start.lead) != memory:
+                raise InputError(f"{self.starts}: starts[{k}].lead is not the memory of "
+                                 f"{self.skill_path}'s skill")  # fmt: skip
+
+    def _capture(self) -> start_pool.Start:
+        seed, blocks = self._problem
+        return start_pool.capture(self._simulator.get_context(), seed, blocks, self._lead)
 
     @property
     def lead(self):
@@ -220,23 +249,12 @@ class SkillEnv(gymnasium.Env):
             return np.asarray(o["observation.relative"], np.float32)
         return np.concatenate([o["observation.state"], o["observation.skill"]]).astype(np.float32)
 
-    def _try(self, seed: int) -> str | None:
-        """Lead the drawn problem up to its chosen action; None once there, else why not
-        (one of :data:`NO_START`'s keys)."""
-        rng = np.random.default_rng(seed)
-        blocks = int(rng.integers(self.blocks[0], self.blocks[1] + 1))
+    def _build(self, seed: int, blocks: int):
+        """The problem of ``seed`` with ``blocks`` cubes checked and planned, and its
+        Diagram built under a new simulator; the checked scenario and the plan."""
         scenario = self._scenario(seed, blocks)
         checked = check(scenario, write=False)
-        view = blocksworld_view(checked.problem)
-        if view.goal <= view.init:
-            return "goal"
         plan, slots, initial = plan_and_layout(checked)
-        roles = blocksworld_roles(checked.problem.domain)
-        kinds = [roles.classify(a).canonical().name for a in plan.actions]
-        eligible = [k for k, name in enumerate(kinds[: self.horizon]) if name in self.kinds]
-        if not eligible:
-            return "kinds"
-        first = int(rng.choice(eligible))
         self._held = HeldSkill(self._lead)
         self._cake = build_diagram(scenario, checked.problem, initial, plan.actions,
                                    slots=slots, skill=self._held)  # fmt: skip
@@ -246,28 +264,108 @@ class SkillEnv(gymnasium.Env):
         root = self._simulator.get_mutable_context()
         set_world_parameters(scene, scene.plant.GetMyMutableContextFromRoot(root),
                              scenario.world, scenario.seed)  # fmt: skip
+        return checked, plan
+
+    def _draw(self, seed: int):
+        """The problem of ``seed`` built, and the plan's first actions of the kinds: (the
+        cube count, their indices), or why there is none (:data:`NO_START`'s key)."""
+        rng = np.random.default_rng(seed)
+        blocks = int(rng.integers(self.blocks[0], self.blocks[1] + 1))
+        checked = check(self._scenario(seed, blocks), write=False)
+        view = blocksworld_view(checked.problem)
+        if view.goal <= view.init:
+            return "goal", rng, blocks, []
+        checked, plan = self._build(seed, blocks)
+        roles = blocksworld_roles(checked.problem.domain)
+        kinds = [roles.classify(a).canonical().name for a in plan.actions]
+        eligible = [k for k, name in enumerate(kinds[: self.horizon]) if name in self.kinds]
+        return (None if eligible else "kinds"), rng, blocks, eligible
+
+    def _begins(self, limit: int):
+        """The lead's run from the problem's start: the skill's progress each time an
+        action of the kinds begins; over when the run stops or passes ``limit`` periods."""
         self._simulator.Initialize()
         self._t = 0
-        starts = 0
-        while True:
+        while self._t < limit:
             self._t += 1
             self._simulator.AdvanceTo(self._t / self.rate_hz)
             prog = self._progress()
             if prog.error is not None:
-                return "lead"
-            if prog.working >= 0 and prog.steps == 1:  # an action has just begun
-                starts += 1
-                if prog.working >= first and prog.context.schema in self.kinds:
+                return
+            if prog.working >= 0 and prog.steps == 1 and prog.context.schema in self.kinds:
+                yield prog
+
+    def _try(self, seed: int) -> str | None:
+        """Lead the drawn problem up to its chosen action; None once there, else why not
+        (one of :data:`NO_START`'s keys)."""
+        why, rng, blocks, eligible = self._draw(seed)
+        if why is not None:
+            return why
+        first = int(rng.choice(eligible))
+        # A lead that struggles (repeats, replans) is not waited for: this draw is given
+        # up once it has taken LEAD_PERIODS a planned action up to the chosen one.
+        for prog in self._begins((first + 1) * LEAD_PERIODS + 1):
+            if prog.working >= first:
+                self._problem = (seed, blocks)
+                self._begin(prog)
+                return None
+        return "lead"
+
+    def record(self, count: int, seed: int = 0) -> list[start_pool.Start]:
+        """``count`` starts for a pool: in the lead's runs of the problems of ``seed``,
+        ``seed + 1``, ..., every start a reset could draw (each action of the kinds among
+        the plan's first ``horizon``), several a problem, so a pool's problems are few.
+        The environment is left at the last start, as a reset leaves it."""
+        pool: list[start_pool.Start] = []
+        for k in range(count * MAX_DRAWS):
+            why, _, blocks, eligible = self._draw(seed + k)
+            if why is not None:
+                continue
+            for prog in self._begins((eligible[-1] + 1) * LEAD_PERIODS + 1):
+                if prog.working < self.horizon:
+                    self._problem = (seed + k, blocks)
+                    pool.append(self._capture())
+                if len(pool) == count:  # standing at the last start, as after a reset
+                    self._begin(prog)
+                    self._first = pool[-1]
+                    return pool
+                if prog.working >= eligible[-1]:
                     break
-            # A lead that struggles (repeats, replans) is not waited for: this draw is
-            # given up once it has taken LEAD_PERIODS a planned action up to the chosen one.
-            if self._t > (first + 1) * LEAD_PERIODS:
-                return "lead"
+        raise ExecutionError(f"CakeDrake/Skill-v0: {len(pool)} starts in {count * MAX_DRAWS} "
+                             f"problems, not {count}: the lead skill {self.skill_path} gave "
+                             "most runs up")  # fmt: skip
+
+    def _begin(self, prog) -> None:
+        """The episode's bookkeeping, at its action's first period ``prog``."""
         self._done, self._succeeded = prog.done, prog.succeeded
         self._ctx, self._schema = prog.context, prog.context.schema
         self._steps = 0
         self._start_z = self._cubes()[self._ctx.cube].translation()[2]
-        return None
+
+    def _restore(self, start: start_pool.Start) -> None:
+        """Stand at ``start``: its problem's Diagram, its state put back; nothing replayed."""
+        key = (start.seed, start.blocks)
+        if self._problem != key:
+            if key in self._built:  # most recently used last
+                self._built[key] = self._built.pop(key)
+            else:
+                self._build(*key)
+                self._built[key] = (self._held, self._cake, self._system, self._simulator)
+                while len(self._built) > BUILT:
+                    self._built.pop(next(iter(self._built)))
+            self._held, self._cake, self._system, self._simulator = self._built[key]
+            self._problem = key
+        start_pool.restore(self._simulator.get_mutable_context(), start, self._lead)
+        self._simulator.Initialize(InitializeParams(suppress_initialization_events=True))
+        self._t = round(start.time * self.rate_hz)
+        self._begin(self._progress())
+
+    def start(self) -> start_pool.Start:
+        """Where the episode began (after :meth:`reset`): its problem and the Diagram's
+        state at its action's first period, as a start pool holds it."""
+        if self._first is None:
+            raise RuntimeError("call reset() before start()")
+        return self._first
 
     def _progress(self):
         context = self._system.GetMyContextFromRoot(self._simulator.get_context())
@@ -280,10 +378,15 @@ class SkillEnv(gymnasium.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        if self._pool:
+            self._first = self._pool[int(self.np_random.integers(len(self._pool)))]
+            self._restore(self._first)
+            return self._observe(ended=False)
         why: dict[str, int] = {}
         for _ in range(MAX_DRAWS):
             reason = self._try(int(self.np_random.integers(0, 2**31 - 1)))
             if reason is None:
+                self._first = self._capture()
                 return self._observe(ended=False)
             why[reason] = why.get(reason, 0) + 1
         kinds = "/".join(self.kinds)

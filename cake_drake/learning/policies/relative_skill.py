@@ -28,6 +28,7 @@ Acting is NumPy alone (no torch at run time): the network is a few dense layers.
 
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 
@@ -310,6 +311,20 @@ class RelativeSkill:
         #: The gripper head's last probability that the gripper should be closed (None
         #: before the action's first answer): what the decision was made from.
         self.p_closed: float | None = None
+
+    #: What the skill remembers between answers (:meth:`reset` sets it).
+    MEMORY = ("_seen", "_closed", "_width", "_waited", "_last", "_onto", "_stopped", "p_closed")
+
+    def memory(self) -> dict:
+        """What it remembers of the action so far (a start pool saves it)."""
+        return copy.deepcopy({name: getattr(self, name) for name in self.MEMORY})
+
+    def restore(self, memory: dict) -> None:
+        """Remember ``memory`` (:meth:`memory`'s), as if it had answered those periods."""
+        if set(memory) != set(self.MEMORY):
+            raise ValueError(f"a relative skill's memory holds {', '.join(self.MEMORY)}")
+        for name, value in memory.items():
+            setattr(self, name, list(value) if name == "_seen" else value)
 
     def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The moves and the gripper's probability of closed for inputs ``x`` (B, n_obs *

@@ -163,6 +163,7 @@ def check_recipe(recipe: RlRecipe) -> RlRecipe:
             f"{recipe.envs} environments = {one}); give at least {one}, or a shorter rollout"
         )
     _whole(recipe.batch_size, 2, one, f"{w}.batch_size")
+    _number(recipe.minutes, 0.0, 10_000.0, f"{w}.minutes")
     _number(recipe.lr, 0.0, 1.0, f"{w}.lr", low_open=True)
     _number(recipe.gamma, 0.0, 1.0, f"{w}.gamma", low_open=True)
     _number(recipe.residual_scale, 0.0, 1.0, f"{w}.residual_scale", low_open=True)
@@ -214,7 +215,8 @@ class Progress:
                 f"{len(recent)}: return {mean:.1f}, success {won}/{len(recent)}")  # fmt: skip
 
 
-def _callback(progress: Progress, every: int):
+def _callback(progress: Progress, every: int, minutes: float = 0.0):
+    """The callback that keeps ``progress`` and, past ``minutes`` (0: never), stops."""
     from stable_baselines3.common.callbacks import BaseCallback  # SB3 imports torch: seconds
 
     class Callback(BaseCallback):
@@ -225,7 +227,7 @@ def _callback(progress: Progress, every: int):
             now, before = self.num_timesteps, self.num_timesteps - self.training_env.num_envs
             if now // every > before // every:
                 progress.log(now)
-            return True
+            return not minutes or time.perf_counter() - progress.t0 < 60.0 * minutes
 
     return Callback()
 
@@ -386,7 +388,8 @@ def train_rl(
     try:
         model = _model(recipe, venv, seed, bool(base))
         every = max(recipe.rollout * recipe.envs, 1000)
-        model.learn(total_timesteps=recipe.steps, callback=_callback(progress, every))
+        callback = _callback(progress, every, recipe.minutes)
+        model.learn(total_timesteps=recipe.steps, callback=callback)
         finished = True
     finally:
         close_envs(venv, finished)

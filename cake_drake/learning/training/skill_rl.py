@@ -22,6 +22,7 @@ import csv
 import time
 from dataclasses import asdict
 from functools import partial
+from pathlib import Path
 
 import gymnasium
 import numpy as np
@@ -74,8 +75,9 @@ class SkillLearnerEnv(gymnasium.Wrapper):
         return self._answer(obs), reward, terminated, truncated, info
 
 
-def skill_env(scenario, recipe: RlRecipe, base: str) -> SkillEnv:
-    """The task's ``CakeDrake/Skill-v0``: its problems, world, controller and reward."""
+def skill_env(scenario, recipe: RlRecipe, base: str, starts: bool = True) -> SkillEnv:
+    """The task's ``CakeDrake/Skill-v0``: its problems, world, controller and reward, and
+    (with ``starts``) the recipe's start pool."""
     world, gen, motion = scenario.world, scenario.task.generate, scenario.motion
     if gen is None:
         raise InputError("a skill residual trains on generated problems: give the task "
@@ -86,8 +88,36 @@ def skill_env(scenario, recipe: RlRecipe, base: str) -> SkillEnv:
         placement=(world.placement.xy, world.placement.yaw_deg), cube_mass_range_kg=masses,
         controller=scenario.controller, reward=asdict(recipe.reward),
         budget=motion.skill_max_steps or DEFAULT_BUDGET, rate_hz=motion.skill_rate_hz,
-        time_step=world.time_step,
+        time_step=world.time_step, starts=recipe.starts if starts else "",
     )  # fmt: skip
+
+
+def record_starts(scenario, label: str, path, count: int) -> int:
+    """A start pool for the task's residual: ``count`` starts, each where the base skill
+    began a place in a run of the task's problems (seeds from the scenario's seed on),
+    written to ``path`` whole; the starts written."""
+    from cake_drake.learning.envs import starts as start_pool
+
+    recipe = check_recipe(scenario.training.rl)
+    base = _base(scenario, recipe, label)
+    env = skill_env(scenario, recipe, base, starts=False)
+    pool = env.record(count, scenario.seed)
+    start_pool.write(path, start_pool.settings_of(env), env.skill_digest, pool)
+    return len(pool)
+
+
+def _base(scenario, recipe: RlRecipe, label: str) -> str:
+    """The skill the residual corrects, checked: one that never sees the arm."""
+    from cake_drake.learning.policies import skills
+
+    base_path = resolve_path(recipe.base or scenario.motion.skills)
+    if not skills._relative(base_path) or skills._with_rl(base_path):
+        where = "training.rl.base" if recipe.base else "motion.skills"
+        raise InputError(f"{label}: {where} {portable_path(base_path)}: a skill residual "
+                         "corrects a skill that never sees the arm (skill.json), and this is "
+                         "not one")  # fmt: skip
+    skills.check_folder(base_path)
+    return str(base_path)
 
 
 def learner_env(scenario, recipe: RlRecipe, base: str):
@@ -124,17 +154,11 @@ def train_skill_rl(
     ``skill_rl.json`` says of it."""
     import torch  # torch and Stable-Baselines3 below: seconds, only where one trains
 
-    from cake_drake.learning.policies import skills
-
     recipe = check_recipe(recipe)
-    base_path = resolve_path(recipe.base or scenario.motion.skills)
-    if not skills._relative(base_path) or skills._with_rl(base_path):
-        where = "training.rl.base" if recipe.base else "motion.skills"
-        raise InputError(f"{label}: {where} {portable_path(base_path)}: a skill residual "
-                         "corrects a skill that never sees the arm (skill.json), and this is "
-                         "not one")  # fmt: skip
-    skills.check_folder(base_path)
-    base = str(base_path)
+    base = _base(scenario, recipe, label)
+    base_path = Path(base)
+    if recipe.starts:  # the pool checked here, before the runners start
+        skill_env(scenario, recipe, base).close()
     torch.set_num_threads(1)
     factory = partial(learner_env, scenario, recipe, base)
     venv = vec_env(factory, recipe, cluster)
@@ -144,7 +168,8 @@ def train_skill_rl(
     eval_every, eval_episodes = recipe.eval_every, recipe.eval_episodes
     checks: list[dict] = []
     best = {"key": None, "steps": 0}
-    evaluator = SkillLearnerEnv(skill_env(scenario, recipe, base), base, recipe.residual_scale)
+    held_out = skill_env(scenario, recipe, base, starts=False)  # replayed: seeds of its own
+    evaluator = SkillLearnerEnv(held_out, base, recipe.residual_scale)
 
     def check_now(model, steps: int) -> None:
         found = measure(model, evaluator, eval_episodes)
@@ -169,7 +194,7 @@ def train_skill_rl(
         if eval_every:
             check_now(model, 0)  # the base alone: the residual starts at zero
         every = max(recipe.rollout * recipe.envs, 1000)
-        callbacks = [_callback(progress, every)]
+        callbacks = [_callback(progress, every, recipe.minutes)]
         if eval_every:
             callbacks.append(EveryNTimesteps(eval_every, Check()))
         model.learn(total_timesteps=recipe.steps, callback=CallbackList(callbacks))
@@ -200,7 +225,7 @@ def train_skill_rl(
         "base": {"path": portable_path(base_path), "sha256": skill_rl.digest(base_path)},
         "task": label,
         "episodes_of": "the places (stack, put-down) of the task's problems, "
-        "reached by the base skill",
+        + (f"from the start pool {recipe.starts}" if recipe.starts else "reached by the base"),
         "reward": asdict(recipe.reward),
         "recipe": {k: v for k, v in asdict(recipe).items() if k != "reward"},
         "seed": seed,
