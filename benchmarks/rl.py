@@ -324,6 +324,40 @@ def figure(folders: list[Path], path: Path, bases: dict[str, float], window: int
     print(f"figure: {path}")
 
 
+def residual_curves(folders: list[Path], path: Path) -> None:
+    """Each skill residual's held-out checks: the places' 95th-percentile offset against
+    environment steps and against minutes of training, beside its base's (the check at 0)."""
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (by_steps, by_time) = plt.subplots(1, 2, figsize=(9.0, 3.8), dpi=100, sharey=True)
+    for folder in folders:
+        info = json.loads((folder / "skill_rl.json").read_text())
+        checks = info["checks"]
+        with open(folder / "progress.csv", encoding="utf-8") as f:
+            rows = list(csv.DictReader(f))
+        at = np.array([int(r["steps"]) for r in rows]), np.array([float(r["wall_s"]) for r in rows])
+        steps = np.array([c["steps"] for c in checks])
+        minutes = np.array([c.get("minutes", np.interp(c["steps"], *at) / 60.0) for c in checks])
+        p95 = np.array([c["p95_mm"] for c in checks])
+        label = f"{folder.name} ({info['algorithm'].upper()})"
+        by_steps.plot(steps, p95, "o-", label=label)
+        by_time.plot(minutes, p95, "o-", label=label)
+    for ax, what in ((by_steps, "environment steps"), (by_time, "minutes of training")):
+        ax.set_xlabel(what)
+        ax.grid(alpha=0.3)
+    by_steps.set_ylabel("held-out places, 95th percentile offset (mm)")
+    by_steps.legend(fontsize=8)
+    fig.suptitle("Skill residuals: held-out places during training (the first point: the base)")
+    fig.tight_layout()
+    fig.savefig(path)
+    print(f"{path}: {len(folders)} residuals' checks")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--throughput", action="store_true")
@@ -336,6 +370,8 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=100_000, help="the first held-out seed")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--figure", type=Path, help="--compare: the success curves to this PNG")
+    p.add_argument("--residual-curves", type=Path, nargs="+", metavar="DIR", default=[],
+                   help="skill residuals' held-out checks, drawn to --figure")  # fmt: skip
     args = p.parse_args()
     print(machine())
     if args.throughput:
@@ -349,6 +385,8 @@ def main() -> None:
         bases = compare(args.compare, seeds, args.workers)
         if args.figure:
             figure(args.compare, args.figure, bases)
+    elif args.residual_curves:
+        residual_curves(args.residual_curves, args.figure or Path("residual_curves.png"))
 
 
 if __name__ == "__main__":

@@ -58,7 +58,8 @@ lerobot, a folder holding another recording without --resume, --resume with anot
 action space, rate, cameras, task or noise, an action space that cannot be recorded,
 --noise negative, not a number or above its bound, a dataset missing a file; with
 --starts, a FILE that exists or a task that is no skill residual's); 3 a policy plug-in
-failed, or the lead skill gave most runs up; 4 the dataset or the pool could not be written; 130 interrupted (finished episodes are kept).
+failed, or the lead skill gave most runs up; 4 the dataset or the pool could not be
+written; 130 interrupted (finished episodes are kept).
 """
 
 

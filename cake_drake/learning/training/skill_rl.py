@@ -174,6 +174,7 @@ def train_skill_rl(
     def check_now(model, steps: int) -> None:
         found = measure(model, evaluator, eval_episodes)
         found["steps"] = steps
+        found["minutes"] = round((time.perf_counter() - progress.t0) / 60.0, 2)
         checks.append(found)
         log(f"{steps} steps: without exploration, {found['placed']}/{found['of']} held-out "
             f"places within 5 mm, offsets {found['median_mm']:.2f} mm median, "
