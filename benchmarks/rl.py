@@ -112,7 +112,7 @@ def throughput(steps: int) -> None:
 def _skill_env(pool: str = ""):
     import gymnasium
 
-    from cake_drake.learning.envs.skill_env import SkillEnv
+    from cake_drake.learning.skills.env import SkillEnv
 
     return SkillEnv(starts=pool) if pool else gymnasium.make(SKILL_ID).unwrapped
 
@@ -121,7 +121,7 @@ class _Answered:
     """One Skill-v0 with the relative skill answering it: the steps of a row."""
 
     def __init__(self, env) -> None:
-        from cake_drake.learning.policies.relative_skill import RelativeSkill
+        from cake_drake.learning.skills.relative import RelativeSkill
 
         self.env, self.skill = env, RelativeSkill(env.skill_path)
 
@@ -141,7 +141,7 @@ def skill_throughput(steps: int, pool_size: int = 40) -> None:
 
     import gymnasium
 
-    from cake_drake.learning.envs import starts
+    from cake_drake.learning.skills import starts
 
     print(f"CakeDrake/Skill-v0, places of 3 to 8 cubes, the skill's own answers, {steps} steps "
           "a row (resets included)")  # fmt: skip
@@ -188,8 +188,8 @@ def skill_throughput(steps: int, pool_size: int = 40) -> None:
 
 def _vector_rate(venv, steps: int, sb3: bool = False) -> float:
     """Steps a second of two environments stepped together, the relative skill answering."""
-    from cake_drake.learning.envs.skill_env import DEFAULT_SKILL
-    from cake_drake.learning.policies.relative_skill import RelativeSkill
+    from cake_drake.learning.skills.env import DEFAULT_SKILL
+    from cake_drake.learning.skills.relative import RelativeSkill
 
     skills = [RelativeSkill(DEFAULT_SKILL) for _ in range(2)]
     obs = venv.reset() if sb3 else venv.reset(seed=1)[0]
@@ -347,12 +347,17 @@ def residual_curves(folders: list[Path], path: Path) -> None:
         label = f"{folder.name} ({info['algorithm'].upper()})"
         by_steps.plot(steps, p95, "o-", label=label)
         by_time.plot(minutes, p95, "o-", label=label)
+        for c, x, y in zip(checks, steps, p95, strict=True):  # a check that lost places
+            if c["placed"] < c["of"]:
+                by_steps.annotate(f"{c['placed']}/{c['of']} placed", (x, y), fontsize=7,
+                                  xytext=(4, -10), textcoords="offset points")  # fmt: skip
     for ax, what in ((by_steps, "environment steps"), (by_time, "minutes of training")):
         ax.set_xlabel(what)
         ax.grid(alpha=0.3)
     by_steps.set_ylabel("held-out places, 95th percentile offset (mm)")
     by_steps.legend(fontsize=8)
-    fig.suptitle("Skill residuals: held-out places during training (the first point: the base)")
+    fig.suptitle("Skill residuals: held-out places within 5 mm during training (the first "
+                 "point: the base)")  # fmt: skip
     fig.tight_layout()
     fig.savefig(path)
     print(f"{path}: {len(folders)} residuals' checks")

@@ -213,7 +213,7 @@ def release(skills: str, seed: int, png: Path) -> int:
     import matplotlib.pyplot as plt
 
     from cake_drake.errors import InputError
-    from cake_drake.learning.policies.relative_skill import INPUT, WIDTH
+    from cake_drake.learning.skills.relative import INPUT, WIDTH
     from cake_drake.outputs.files import check_output_file
 
     try:

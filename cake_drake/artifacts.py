@@ -60,6 +60,7 @@ class Kind:
 
 
 _POLICIES = "cake_drake.learning.policies"
+_SKILLS = "cake_drake.learning.skills"
 KINDS: dict[str, Kind] = {
     kind.name: kind
     for kind in (
@@ -73,14 +74,14 @@ KINDS: dict[str, Kind] = {
              "cake_drake.dynamic.residual:load_model", "cake_drake.dynamic.residual:load_model",
              "cake_drake.learning.training.residual:describe"),
         Kind("skill", "a learned skill (a checkpoint reading observation.skill)", "geometric",
-             f"{_POLICIES}.skills:check_folder", f"{_POLICIES}.skills:make",
-             f"{_POLICIES}.skills:describe"),
+             f"{_SKILLS}.checkpoints:check_folder", f"{_SKILLS}.checkpoints:make",
+             f"{_SKILLS}.checkpoints:describe"),
         Kind("relative_skill", "a skill that never sees the arm (skill.json)", "geometric",
-             f"{_POLICIES}.relative_skill:check_folder", f"{_POLICIES}.relative_skill:make",
-             f"{_POLICIES}.relative_skill:describe"),
+             f"{_SKILLS}.relative:check_folder", f"{_SKILLS}.relative:make",
+             f"{_SKILLS}.relative:describe"),
         Kind("skill_rl", "a skill with an RL residual (skill_rl.json)", "geometric",
-             f"{_POLICIES}.skill_rl:check_folder", f"{_POLICIES}.skill_rl:make",
-             f"{_POLICIES}.skill_rl:describe"),
+             f"{_SKILLS}.residual:check_folder", f"{_SKILLS}.residual:make",
+             f"{_SKILLS}.residual:describe"),
         Kind("policy", "a whole-task policy (a LeRobot checkpoint)", "symbolic + geometric",
              f"{_POLICIES}.lerobot_checkpoint:check_folder",
              f"{_POLICIES}.lerobot_checkpoint:CheckpointPolicy",

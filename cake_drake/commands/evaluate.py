@@ -99,7 +99,7 @@ def main_evaluate(argv: list[str] | None = None) -> int:
             "python -m cake_drake.run with the skill checkpoint draws one's end"
         )
     if skills:  # learned skills: the demonstrator's place under the planner
-        from cake_drake.learning.policies.skills import check_folder
+        from cake_drake.learning.skills.checkpoints import check_folder
 
         check_folder(Path(args.policy), args.device)
         options = {"path": str(Path(args.policy).resolve()), "device": args.device}

@@ -146,7 +146,7 @@ def main_record(argv: list[str] | None = None) -> int:
 
 
 def _record_starts(args) -> int:
-    from cake_drake.learning.training.skill_rl import record_starts
+    from cake_drake.learning.skills.train_residual import record_starts
     from cake_drake.scenario import load_scenario
 
     if args.spec is None:

@@ -282,7 +282,7 @@ def _main_policy(args: argparse.Namespace) -> int:
 
 def _main_relative(args: argparse.Namespace, recipe) -> int:
     """A skill that never sees the arm, trained on the recording of the hand's moves."""
-    from cake_drake.learning.training.relative_skill import FILES, train_relative
+    from cake_drake.learning.skills.train_relative import FILES, train_relative
     from cake_drake.outputs.files import OutputDir
 
     unread = [f for f in ("dagger", "resume", "weights", "cameras") if getattr(args, f)]
@@ -348,8 +348,8 @@ def _main_rl(args: argparse.Namespace) -> int:
     recipe = rl.check_recipe(replace(recipe, **{k: v for k, v in given.items() if v is not None}))
     cluster = ray_engine(args.ray, recipe.envs)  # an address nothing answers at: refused here
     if scenario.motion.skills:  # a residual on a skill, one place an episode
-        from cake_drake.learning.policies.skill_rl import FILES
-        from cake_drake.learning.training.skill_rl import train_skill_rl as train
+        from cake_drake.learning.skills.residual import FILES
+        from cake_drake.learning.skills.train_residual import train_skill_rl as train
     else:
         FILES, train = rl.FILES, rl.train_rl
     with OutputDir(args.out, "train --rl", FILES, [args.rl]) as staged:

@@ -4,7 +4,7 @@
 problem size, steps, time and the reasons episodes ended. A learned skill checkpoint is
 evaluated under the planner: each episode is the same problem and placement run with the
 plan, the execution monitor and the skills as the geometric layer
-(:func:`cake_drake.learning.policies.skills.episode`), and the summary says how often the
+(:func:`cake_drake.learning.skills.checkpoints.episode`), and the summary says how often the
 monitor's repeats and replans rescued an episode.
 """
 
@@ -17,8 +17,8 @@ from dataclasses import asdict
 import numpy as np
 
 from cake_drake.learning.parallel import map_ordered
-from cake_drake.learning.policies.skills import episode as skill_episode
 from cake_drake.learning.rollout import FRAMES, EpisodeSpec, rollout
+from cake_drake.learning.skills.checkpoints import episode as skill_episode
 from cake_drake.scenario import SKILL_POLICY
 
 

@@ -3,8 +3,8 @@
 :mod:`.train` runs LeRobot's own loop (imitation), :mod:`.dagger` rounds of DAgger over
 it, :mod:`.rl` Stable-Baselines3's PPO or SAC (the RL policy's folder), :mod:`.residual`
 the dynamic layer's residual by least squares, :mod:`.planner` the learned planner
-(:mod:`.planner_reward` from the goal's reward alone), :mod:`.relative_skill` a skill
-that never sees the arm, and :mod:`.skill_rl` its RL residual.
+(:mod:`.planner_reward` from the goal's reward alone). The learned skills' trainings
+live with them (:mod:`cake_drake.learning.skills`).
 What the results act with lives in :mod:`cake_drake.learning.policies` (and, for the
 residual and the planner, in their layers: :mod:`cake_drake.dynamic.residual`,
 :mod:`cake_drake.symbolic.learned`).

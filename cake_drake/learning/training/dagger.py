@@ -50,8 +50,8 @@ from cake_drake.learning.data.recording import (
     write_whole,
 )
 from cake_drake.learning.parallel import imap
-from cake_drake.learning.policies.skills import SKILL_LEARNER
 from cake_drake.learning.rollout import EXPERT, LEARNER_ACTED, EpisodeSpec, Teacher, rollout
+from cake_drake.learning.skills.checkpoints import SKILL_LEARNER
 from cake_drake.learning.training import train as training
 from cake_drake.scenario import CHECKPOINT_POLICY, Training
 from cake_drake.systems.policy_source import make_policy

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cake_drake.learning.policies import skill_rl
+from cake_drake.learning.skills import residual as skill_rl
 from tests.helpers import ROOT
 
 SKILL = ROOT / "models" / "policies" / "skills"
@@ -86,7 +86,7 @@ def test_a_short_ppo_run_writes_its_folder_with_held_out_checks(trained):
 def test_zero_residual_weights_give_the_skill_s_action_exactly(trained):
     from stable_baselines3 import PPO
 
-    from cake_drake.learning.policies.relative_skill import RelativeSkill
+    from cake_drake.learning.skills.relative import RelativeSkill
 
     residual = skill_rl.ResidualSkill(trained / "out")
     with __import__("torch").no_grad():

@@ -6,7 +6,7 @@ The environment is ``CakeDrake/Skill-v0`` with the task's problems (``task.gener
 episodes are the places (stack, put-down) the base skill reaches in its own runs. The
 learner (Stable-Baselines3's PPO or SAC, the task's ``training.rl`` recipe) reads the
 skill's input and the base skill's answer and adds a bounded correction to the base's
-hand moves (:mod:`cake_drake.learning.policies.skill_rl`); its last layer starts at
+hand moves (:mod:`cake_drake.learning.skills.residual`); its last layer starts at
 zero, so before training it is the base, number for number.
 
 Every ``eval_every`` steps the learner is measured without exploration on the same
@@ -29,9 +29,9 @@ import numpy as np
 from gymnasium import spaces as gs
 
 from cake_drake.errors import InputError
-from cake_drake.learning.envs.skill_env import SkillEnv
-from cake_drake.learning.policies import skill_rl
-from cake_drake.learning.policies.relative_skill import INPUT, RelativeSkill
+from cake_drake.learning.skills import residual as skill_rl
+from cake_drake.learning.skills.env import SkillEnv
+from cake_drake.learning.skills.relative import INPUT, RelativeSkill
 from cake_drake.learning.training.rl import (
     Progress,
     _callback,
@@ -96,7 +96,7 @@ def record_starts(scenario, label: str, path, count: int) -> int:
     """A start pool for the task's residual: ``count`` starts, each where the base skill
     began a place in a run of the task's problems (seeds from the scenario's seed on),
     written to ``path`` whole; the starts written."""
-    from cake_drake.learning.envs import starts as start_pool
+    from cake_drake.learning.skills import starts as start_pool
 
     recipe = check_recipe(scenario.training.rl)
     base = _base(scenario, recipe, label)
@@ -108,7 +108,7 @@ def record_starts(scenario, label: str, path, count: int) -> int:
 
 def _base(scenario, recipe: RlRecipe, label: str) -> str:
     """The skill the residual corrects, checked: one that never sees the arm."""
-    from cake_drake.learning.policies import skills
+    from cake_drake.learning.skills import checkpoints as skills
 
     base_path = resolve_path(recipe.base or scenario.motion.skills)
     if not skills._relative(base_path) or skills._with_rl(base_path):

@@ -25,8 +25,8 @@ import numpy as np
 
 from cake_drake.errors import InputError
 from cake_drake.formats import check_format, read_json_mapping
-from cake_drake.learning.policies import relative_skill
 from cake_drake.learning.policies.rl import ALGORITHMS, CURVE, MODEL, PROGRESS, check_weights
+from cake_drake.learning.skills import relative as relative_skill
 from cake_drake.policy.observations import RELATIVE_SIZE
 from cake_drake.scenario import portable_path, resolve_path
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from cake_drake.errors import InputError
-from cake_drake.learning.envs import starts
-from cake_drake.learning.envs.skill_env import SkillEnv
-from cake_drake.learning.policies.relative_skill import RelativeSkill
+from cake_drake.learning.skills import starts
+from cake_drake.learning.skills.env import SkillEnv
+from cake_drake.learning.skills.relative import RelativeSkill
 from tests.helpers import ROOT
 
 SKILL = ROOT / "models" / "policies" / "skills"

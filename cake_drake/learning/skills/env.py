@@ -38,7 +38,7 @@ tries), or takes more than ``LEAD_PERIODS`` control periods an action to reach i
 draw thrown away, and ``reset`` draws again (at most ``MAX_DRAWS`` times): the starts
 are those of the lead's runs that go well.
 
-With ``starts`` (a start pool, :mod:`cake_drake.learning.envs.starts`; ``python -m
+With ``starts`` (a start pool, :mod:`cake_drake.learning.skills.starts`; ``python -m
 cake_drake.record SPEC --starts FILE`` writes one, :meth:`SkillEnv.start` gives the
 current episode's), ``reset`` draws one of the pool's starts and puts the Diagram's
 state back there: nothing is replayed, and the episode is the one the replayed start
@@ -61,8 +61,8 @@ from pydrake.systems.analysis import InitializeParams, Simulator
 from cake_drake.diagram import build_diagram
 from cake_drake.errors import ExecutionError, InputError
 from cake_drake.learning.envs import rewards
-from cake_drake.learning.envs import starts as start_pool
 from cake_drake.learning.envs.env import _blocks, set_world
+from cake_drake.learning.skills import starts as start_pool
 from cake_drake.paths import MODELS_DIR, resolve_path
 from cake_drake.pipeline import check, plan_and_layout
 from cake_drake.policy import spaces
@@ -158,7 +158,7 @@ class SkillEnv(gymnasium.Env):
         horizon: int = 6,
         starts: str = "",
     ) -> None:
-        from cake_drake.learning.policies import skills
+        from cake_drake.learning.skills import checkpoints as skills
 
         self.blocks, self.kinds = _blocks(blocks), _kinds(actions)
         if not isinstance(tall, bool):

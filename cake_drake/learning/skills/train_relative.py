@@ -1,4 +1,4 @@
-"""Training a skill that never sees the arm (:mod:`cake_drake.learning.policies.relative_skill`)
+"""Training a skill that never sees the arm (:mod:`cake_drake.learning.skills.relative`)
 from a recording of the hand's moves (``ee_delta``, with ``skill`` and ``ground_action``).
 
 The recording's frames are cut into per-action segments (where ``ground_action`` changes;
@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from cake_drake.errors import InputError
-from cake_drake.learning.policies import relative_skill as rs
+from cake_drake.learning.skills import relative as rs
 from cake_drake.policy.observations import SKILL_SIZE
 
 #: What a training writes.
@@ -51,7 +51,7 @@ TRANSIT_CLEAR = 0.01
 #: The share of a batch's frames :func:`augment` may vary.
 AUGMENTED = 0.5
 #: m: the scale the moves are learned on (``compress`` in
-#: :mod:`cake_drake.learning.policies.relative_skill`): a network that answers the move
+#: :mod:`cake_drake.learning.skills.relative`): a network that answers the move
 #: itself, standardised over whole crossings (a spread of decimetres), answered a place's
 #: last millimetres a few millimetres off, and held the cube over its place.
 MOVE_SCALE = 0.02
@@ -180,7 +180,7 @@ def augment(x: np.ndarray, moves: np.ndarray, rng) -> tuple[np.ndarray, np.ndarr
       cube (``GRASP_JITTER``): the cube stays where it is in the world, so everything the
       frame reads from the hand (the cube, its rest, the transit height, their yaws)
       moves alike, and both answers stay: where the held cube goes, from its rest
-      (:func:`cake_drake.learning.policies.relative_skill.target_from_hand`), and whether
+      (:func:`cake_drake.learning.skills.relative.target_from_hand`), and whether
       to let go of it, which the demonstrator decided from the cube at its rest. The
       fingers' width on it is varied by up to ``GRIP_JITTER``. Every demonstrated grasp
       is centred to a millimetre, and the fingers close on every cube to a tenth of one:

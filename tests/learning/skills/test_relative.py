@@ -21,7 +21,7 @@ import pytest
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from cake_drake.errors import InputError
-from cake_drake.learning.policies import relative_skill as rs
+from cake_drake.learning.skills import relative as rs
 from cake_drake.policy.observations import (
     RELATIVE_SIZE,
     relative_vector,
@@ -125,7 +125,7 @@ def test_the_gripper_decision_holds_between_its_thresholds():
 
 def test_the_gripper_loss_is_the_binary_cross_entropy_by_hand():
     torch = pytest.importorskip("torch")
-    from cake_drake.learning.training.relative_skill import losses
+    from cake_drake.learning.skills.train_relative import losses
 
     logit = torch.tensor([2.0, -1.0, 0.0])
     closed = torch.tensor([1.0, 0.0, 1.0])
@@ -273,7 +273,7 @@ def test_a_hand_still_crossing_learns_to_come_over_its_target_before_going_down(
     """The heading half a second on, but no further than where the hand comes over its
     target: a crossing frame is taught the point over the cube, not the descent after
     it (a corner cut brings open fingers down beside a tower's top cube)."""
-    from cake_drake.learning.training import relative_skill as training
+    from cake_drake.learning.skills import train_relative as training
 
     x, moves, closed = training.examples(_pick_recording(), 1, lookahead=5)
     assert x.shape == (25, RELATIVE_SIZE) and moves.shape == (25, 4)
@@ -293,7 +293,7 @@ def test_training_varies_only_what_leaves_the_answer_where_it_was():
     """The trainer's augmentation moves the hand about a held cube and a descending
     hand's transit height, and changes the label only as much as keeps the answer in the
     world the same: the held cube set where it was set, the hand sent where it was sent."""
-    from cake_drake.learning.training import relative_skill as training
+    from cake_drake.learning.skills import train_relative as training
 
     place = np.zeros(RELATIVE_SIZE)
     place[3], place[4:7], place[7] = 1.0, [0.001, -0.002, -0.001], 0.05  # stack, held
@@ -465,7 +465,7 @@ def test_a_mass_range_is_drawn_per_seed_and_checked():
 
 def test_a_damaged_recording_is_one_line_naming_its_file(tmp_path):
     pytest.importorskip("pyarrow")
-    from cake_drake.learning.training.relative_skill import read_frames
+    from cake_drake.learning.skills.train_relative import read_frames
 
     (tmp_path / "meta").mkdir()
     (tmp_path / "meta" / "info.json").write_text('{"fps": 10}')

@@ -17,7 +17,6 @@ import numpy as np
 from cake_drake import artifacts
 from cake_drake.errors import InputError
 from cake_drake.learning.data.dataset import require_lerobot
-from cake_drake.learning.policies import relative_skill
 from cake_drake.learning.policies.expert import ClosedLoopExpert
 from cake_drake.learning.policies.lerobot_checkpoint import (
     check_device,
@@ -27,6 +26,7 @@ from cake_drake.learning.policies.lerobot_checkpoint import (
     read_checkpoint,
 )
 from cake_drake.learning.policies.mlp.acting import load as load_mlp
+from cake_drake.learning.skills import relative as relative_skill
 from cake_drake.pipeline import check, get_plan, run
 from cake_drake.policy.observations import SKILL_SIZE
 from cake_drake.policy.spaces import step_budget
@@ -75,7 +75,7 @@ def check_folder(path: Path, device: str = "cpu", action_space: str = "") -> Pat
             raise InputError(f"{path}: a skill that never sees the arm acts in NumPy on the "
                              f"CPU; motion.skill_device: cpu, not {device}")  # fmt: skip
         if _with_rl(path):
-            from cake_drake.learning.policies import skill_rl
+            from cake_drake.learning.skills import residual as skill_rl
 
             skill_rl.check_folder(path)
             return path
@@ -147,7 +147,7 @@ class CheckpointSkill:
 def describe(path: str | Path) -> str:
     """What the skill at ``path`` reads and answers, for a run's ``layers``."""
     if _with_rl(Path(path)):
-        from cake_drake.learning.policies import skill_rl
+        from cake_drake.learning.skills import residual as skill_rl
 
         return skill_rl.describe(path)
     if _relative(Path(path)):
@@ -162,7 +162,7 @@ def make(path: str, device: str = "cpu", ensemble: float = 0.0):
     ``motion.skill_ensemble``, for a checkpoint's action chunks): a skill that never sees
     the arm, or a LeRobot skill checkpoint."""
     if _with_rl(Path(path)):
-        from cake_drake.learning.policies import skill_rl
+        from cake_drake.learning.skills import residual as skill_rl
 
         return skill_rl.ResidualSkill(path)
     if _relative(Path(path)):
