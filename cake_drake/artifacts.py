@@ -4,26 +4,28 @@ one checked loader and describer of each.
 A learned part of the cake is a folder, and its kind is decided here, once, from the files
 it already has; nothing is re-saved to say so:
 
-=========  ==============================  =========================================
-kind       the folder holds                what it replaces
-=========  ==============================  =========================================
-rl         ``rl.json``, ``model.zip``      a whole-task policy learned from a reward
-                                           (alone, or a residual on a frozen base)
-planner    ``planner.json``,               the symbolic layer's planner
-           ``weights.npz``
-residual   ``residual.json``               a residual torque beside computed torque
-skill      a LeRobot checkpoint whose      the geometric layer (a skill per ground
-           inputs name ``observation.      action, under the planner), reading the
-           skill``                         arm's joints
-relative_  ``skill.json``,                 the geometric layer, never seeing the arm
-skill      ``weights.npz``                 (hand moves with IK below, the gripper as
-                                           a decision)
-skill_rl   ``skill_rl.json``,              the same, a relative skill with an RL
-           ``model.zip``                   residual on its hand moves
-policy     any other LeRobot checkpoint    the symbolic and geometric layers (a
-           (``config.json``,               whole-task policy)
-           ``model.safetensors``)
-=========  ==============================  =========================================
+==========  ==============================  =========================================
+kind        the folder holds                what it replaces
+==========  ==============================  =========================================
+rl          ``rl.json``, ``model.zip``      a whole-task policy learned from a reward
+                                            (alone, or a residual on a frozen base)
+planner     ``planner.json``,               the symbolic layer's planner
+            ``weights.npz``
+residual    ``residual.json``               a residual torque beside computed torque
+skill       a LeRobot checkpoint whose      the geometric layer (a skill per ground
+            inputs name ``observation.      action, under the planner), reading the
+            skill``                         arm's joints
+relative_   ``skill.json``,                 the geometric layer, never seeing the arm
+skill       ``weights.npz``                 (hand moves with IK below, the gripper as
+                                            a decision)
+skill_rl    ``skill_rl.json``,              the same, a relative skill with an RL
+            ``model.zip``                   residual on its hand moves
+perception  ``perception.json``,            the perception layer's fit (a cube's pose
+            ``weights.npz``                 from its depth points)
+policy      any other LeRobot checkpoint    the symbolic and geometric layers (a
+            (``config.json``,               whole-task policy)
+            ``model.safetensors``)
+==========  ==============================  =========================================
 
 :func:`detect` names the kind; :func:`require` refuses, in one line, a folder of another
 kind than the caller runs (a skill given as a whole-task policy, a planner given to
@@ -82,6 +84,9 @@ KINDS: dict[str, Kind] = {
         Kind("skill_rl", "a skill with an RL residual (skill_rl.json)", "geometric",
              f"{_SKILLS}.residual:check_folder", f"{_SKILLS}.residual:make",
              f"{_SKILLS}.residual:describe"),
+        Kind("perception", "a learned cube estimator (perception.json)", "perception",
+             "cake_drake.perception.learned:check_folder", "cake_drake.perception.learned:load",
+             "cake_drake.perception.learned:describe"),
         Kind("policy", "a whole-task policy (a LeRobot checkpoint)", "symbolic + geometric",
              f"{_POLICIES}.lerobot_checkpoint:check_folder",
              f"{_POLICIES}.lerobot_checkpoint:CheckpointPolicy",
@@ -91,7 +96,8 @@ KINDS: dict[str, Kind] = {
 
 #: The file that says a folder is of a kind, for the kinds that have one of their own.
 MARKERS = {"rl": "rl.json", "planner": "planner.json", "residual": "residual.json",
-           "relative_skill": "skill.json", "skill_rl": "skill_rl.json"}  # fmt: skip
+           "relative_skill": "skill.json", "skill_rl": "skill_rl.json",
+           "perception": "perception.json"}  # fmt: skip
 #: The kinds that are the geometric layer (``motion.skills``, ``evaluate``'s skills).
 SKILL_KINDS = ("skill", "relative_skill", "skill_rl")
 
@@ -125,7 +131,7 @@ def detect(path: str | Path) -> Kind:
         raise InputError(
             f"{path}: not a LeRobot checkpoint (no config.json and model.safetensors here, "
             "nor in checkpoints/last/pretrained_model), nor another learned part (rl.json, "
-            "planner.json, residual.json, skill.json, skill_rl.json)"
+            "planner.json, residual.json, skill.json, skill_rl.json, perception.json)"
         )
     config = read_json_mapping(folder / "config.json", "a LeRobot policy's config")
     inputs = config.get("input_features")
@@ -173,7 +179,7 @@ def describe(path: str | Path) -> str:
 def _kinds_said() -> str:
     return ("rl.json (RL), planner.json (a learned planner), residual.json (a residual), "
             "skill.json (a skill that never sees the arm), skill_rl.json (one with an RL "
-            "residual), or a LeRobot checkpoint: "
+            "residual), perception.json (learned eyes), or a LeRobot checkpoint: "
             "config.json and model.safetensors")  # fmt: skip
 
 

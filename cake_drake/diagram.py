@@ -27,6 +27,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import Diagram, DiagramBuilder, System
 from pydrake.systems.primitives import LogVectorOutput, VectorLogSink
 
+from cake_drake import artifacts
 from cake_drake.dynamic.controllers import (
     Controller,
     gravity_term,
@@ -41,6 +42,7 @@ from cake_drake.geometric.planners import make_planner
 from cake_drake.geometric.solve import Planning, TimedSolver
 from cake_drake.paths import portable_path, resolve_path
 from cake_drake.perception.estimator import CubeEstimator
+from cake_drake.perception.learned import checkpoint_of, is_learned
 from cake_drake.plugins import PluginError, is_plugin
 from cake_drake.scenario import Policy, Recorded, Scenario
 from cake_drake.symbolic import GroundAction, Problem
@@ -511,6 +513,10 @@ def _add_perception(builder: DiagramBuilder, scenario: Scenario, scene: Scene):
     views = perception.views()
     sensors = add_cameras(builder, scene, views, prefix="perception_camera_")
     oracle = perception.estimator == "oracle"
+    network = None
+    if is_learned(perception.estimator):
+        network = artifacts.load(checkpoint_of(perception.estimator), "perception",
+                                 role="perception.estimator")  # fmt: skip
     cubes = {n: int(scene.cube_body(n).index()) for n in scene.cubes}
     colours = {n: rgb for n, (_, rgb) in cube_colours(list(scene.cubes)).items()}
     estimator = builder.AddNamedSystem(
@@ -518,6 +524,7 @@ def _add_perception(builder: DiagramBuilder, scenario: Scenario, scene: Scene):
         CubeEstimator(
             plant, scene.arm, scene.hand, cubes, colours, views, perception.noise,
             scenario.seed, perception.rate_hz, labels=cubes if oracle else None,
+            network=network, keep_points=perception.keep_points,
         ),
     )  # fmt: skip
     builder.Connect(plant.get_state_output_port(scene.arm), estimator.GetInputPort("arm_state"))

@@ -19,7 +19,7 @@ from pydrake.systems.analysis import Simulator
 
 from cake_drake.diagram import CakeDiagram
 from cake_drake.errors import CakeDrakeError
-from cake_drake.perception.report import errors, summarize
+from cake_drake.perception.report import errors, summarize, truth_at
 from cake_drake.plugins import budget, is_plugin, raised_in_simulation
 from cake_drake.world.cameras import grab
 from cake_drake.world.facts import Reading, read_facts, stack_offsets
@@ -95,7 +95,9 @@ class Execution:
     frames: dict = field(default_factory=dict)  # each camera's last image (name -> array)
     #: The perception layer's record (empty for ``truth``): ``summary`` (summary.json's
     #: ``perception`` figures), ``rows`` (each estimate's errors), ``image`` (the first
-    #: perception camera's last colour image), ``outlines`` (its estimated cubes there).
+    #: perception camera's last colour image), ``outlines`` (its estimated cubes there),
+    #: ``samples`` (with ``perception.keep_points``: each sighting's points, rays and the
+    #: truth: (t, cube, points, rays, position, rotation)).
     perception: dict = field(default_factory=dict)
 
     @property
@@ -311,9 +313,12 @@ def _perception_record(cake: CakeDiagram, context) -> dict:
         "noise": p.noise.model,
         **summarize(rows, belief.frames, final.unseen()),
     }
+    samples = [
+        (t, name, P, rays, *truth_at(truth, name, t)) for t, name, P, rays in belief.points
+    ] if belief.points is not None else None  # fmt: skip
     first = estimator.cameras[0]
     sensor = cake.diagram.GetSubsystemByName(f"perception_camera_{first.name}")
     image = sensor.color_image_output_port().Eval(sensor.GetMyContextFromRoot(context)).data
     estimates = {n: e.X_WB for n, e in final.cubes.items() if e.X_WB is not None}
     return {"summary": summary, "rows": rows, "image": np.array(image[:, :, :3]),
-            "camera": first, "estimates": estimates}  # fmt: skip
+            "camera": first, "estimates": estimates, "samples": samples}  # fmt: skip

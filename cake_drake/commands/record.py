@@ -49,6 +49,14 @@ where the base skill began a place in a run of the task's problems (seeds from t
 scenario's seed on), one JSON file written whole; training.rl.starts: FILE then starts
 CakeDrake/Skill-v0's episodes there, nothing replayed. FILE must not exist yet.
 
+--frames --out DIR records the learned eyes' data instead: --episodes runs of the classical
+cake from the cameras (default 10; seeds from %(seed)d, or --set seed=S), each of a scene
+drawn from its seed (a generated problem of 3 to 10 cubes, half of them tall towers, the
+tasks' placement jitter, depth noise on half the runs, the cameras moved up to 1 cm); every
+cube seen in every frame becomes a sighting: its depth points, their rays and its true
+pose. DIR gets frames.json and frames.npz (docs/perception.md); train on it with python -m
+cake_drake.train DIR --perception --out NET. No SPEC: the scenes are the recording's own.
+
 --replay DATASET feeds every episode's actions (a noisy recording's executed ones), open
 loop, through the same environment from the same seed and reports how many build the
 goal again.
@@ -64,9 +72,11 @@ written; 130 interrupted (finished episodes are kept).
 
 
 def record_parser() -> argparse.ArgumentParser:
+    from cake_drake.learning.data.frames import FRAMES_SEED
+
     p = CliParser(
         prog="python -m cake_drake.record",
-        description=RECORD_DOC,
+        description=RECORD_DOC % {"seed": FRAMES_SEED},
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("spec", type=Path, nargs="?", help="a scenario file")
@@ -90,6 +100,10 @@ def record_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--resume", action="store_true", help="continue an interrupted recording")
     p.add_argument("--replay", type=Path, metavar="DATASET", help="replay a dataset's actions")
+    p.add_argument(
+        "--frames", action="store_true",
+        help="record the learned eyes' data (cubes seen by the perception cameras) into --out",
+    )  # fmt: skip
     p.add_argument(
         "--starts", type=Path, metavar="FILE",
         help="record a start pool for a skill residual's task (--episodes starts)",
@@ -117,6 +131,8 @@ def main_record(argv: list[str] | None = None) -> int:
         return EXIT_OK
     if args.starts is not None:
         return _record_starts(args)
+    if args.frames:
+        return _record_frames(args, workers)
     if args.spec is None or args.out is None:
         raise InputError("record: give a scenario file and --out DATASET (or --replay DATASET)")
     if not 1 <= args.episodes <= 100_000:
@@ -142,6 +158,28 @@ def main_record(argv: list[str] | None = None) -> int:
         f"cameras {', '.join(report['cameras']) or 'none'}); {len(report['failed'])} failed "
         "(listed in report.json)"
     )
+    return EXIT_OK
+
+
+def _record_frames(args, workers: int) -> int:
+    from cake_drake.learning.data.frames import FRAMES_SEED, record_frames
+
+    if args.spec is not None or args.name is not None:
+        raise InputError("record --frames draws its own scenes: give no SPEC or --name")
+    if args.out is None:
+        raise InputError("record --frames: give --out DIR, the dataset's folder")
+    if not 1 <= args.episodes <= 10_000:
+        raise InputError(f"--episodes {args.episodes}: runs to record, from 1 to 10000")
+    seed = FRAMES_SEED
+    for item in args.set or []:
+        key, _, value = item.partition("=")
+        if key != "seed" or not value.isdigit():
+            raise InputError(f"--set {item}: record --frames reads only --set seed=S")
+        seed = int(value)
+    meta = record_frames(args.out, args.episodes, seed, workers,
+                         progress=lambda line: print(line, flush=True))  # fmt: skip
+    print(f"{args.out}: {meta['samples']} sightings of {len(meta['runs'])} runs (seeds "
+          f"{meta['seeds'][0]}-{meta['seeds'][1]}) in {meta['minutes']:.1f} min")  # fmt: skip
     return EXIT_OK
 
 

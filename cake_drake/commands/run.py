@@ -67,7 +67,8 @@ def run_parser() -> argparse.ArgumentParser:
     g.add_argument(
         "--perception",
         help="perception.estimator: where the cake reads the cubes from: truth (the "
-        "simulator's own poses; default) | depth (the cameras: colour, depth, ICP) | oracle",
+        "simulator's own poses; default) | depth (the cameras: colour, depth, ICP) | oracle "
+        "| learned (the cameras read by the shipped point network) | learned@DIR",
     )
     g.add_argument(
         "--depth-noise",

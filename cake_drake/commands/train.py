@@ -1,6 +1,6 @@
 """``train``: a policy, DAgger, a residual, the learned planner or RL, trained.
 
-Five modes, each chosen by a flag (a policy on a recording by none) and each declared
+Six modes, each chosen by a flag (a policy on a recording by none) and each declared
 with the flags it reads (:data:`MODES`): a flag given that the chosen mode does not read
 is refused in one line naming the flag and the mode (:func:`refuse_unread`), before any
 work. The training is the library's (:mod:`cake_drake.learning`).
@@ -78,6 +78,15 @@ no search labels anything; the network plays random problems in the symbolic mod
 up to --blocks' MAX, default 12; --batch-size problems an update, default 16), and keeps the
 weights that planned best in greedy checks on 20 and 50 blocks.
 
+--perception trains the learned eyes instead: DATASET... are frames datasets (python -m
+cake_drake.record --frames, with the same cameras): every cube the perception cameras saw
+with its true pose. A point network (each point's offset from the cube's points' median
+and its ray in, a weighed vote for the centre and the yaw out) learns them on the CPU
+(--steps, default %(eyes_steps)d; --batch-size sightings, default %(eyes_batch)d;
+--minutes, a wall-clock cap; --seed), the last tenth of the runs held out and the best
+check's weights kept. OUT gets perception.json, weights.npz and progress.csv: run with
+--perception learned@OUT.
+
 --rl SUITE --name TASK learns TASK of the scenario file SUITE from a reward instead, from
 no dataset: Stable-Baselines3's PPO (or SAC) on CakeDrake/Stack-v0 with the task's
 episodes, with the task's training.rl recipe (algorithm, steps, environments side by side,
@@ -115,7 +124,13 @@ def train_parser() -> argparse.ArgumentParser:
     p = CliParser(
         prog="python -m cake_drake.train",
         description=TRAIN_DOC
-        % {**asdict(PlannerRecipe()), "most": MAX_BLOCKS, "per_round": EPISODES_PER_ROUND},
+        % {
+            **asdict(PlannerRecipe()),
+            "most": MAX_BLOCKS,
+            "per_round": EPISODES_PER_ROUND,
+            "eyes_steps": PERCEPTION_RECIPE["steps"],
+            "eyes_batch": PERCEPTION_RECIPE["batch_size"],
+        },
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument(
@@ -140,6 +155,14 @@ def train_parser() -> argparse.ArgumentParser:
         "--blocks", type=int, nargs=2, metavar=("MIN", "MAX"),
         help=f"--planner: the problems' sizes (default {PlannerRecipe.min_blocks} "
         f"{PlannerRecipe.max_blocks})",
+    )  # fmt: skip
+    p.add_argument(
+        "--perception", action="store_true",
+        help="train the learned eyes on a frames dataset (python -m cake_drake.record --frames)",
+    )  # fmt: skip
+    p.add_argument(
+        "--minutes", type=float,
+        help="--perception: stop at this wall-clock budget (default: the steps alone)",
     )  # fmt: skip
     p.add_argument(
         "--rl",
@@ -241,7 +264,8 @@ def _datasets(args: argparse.Namespace) -> list[Path]:
     """The DATASET arguments of a mode that reads them: at least one."""
     if not args.dataset:
         raise InputError("no DATASET given: train reads a recording (or run folders with "
-                         "--residual; none with --planner)")  # fmt: skip
+                         "--residual, frames datasets with --perception; none with "
+                         "--planner)")  # fmt: skip
     return args.dataset
 
 
@@ -310,6 +334,43 @@ def _main_relative(args: argparse.Namespace, recipe) -> int:
         f"of {args.dataset} in {info['minutes']:.1f} min (gripper decided right on "
         f"{100 * info['gripper_accuracy']:.1f} % of them); run it with motion.skills: {args.out}"
     )
+    return EXIT_OK
+
+
+#: The learned eyes' recipe: steps, batch (sightings), learning rate, network width.
+PERCEPTION_RECIPE = {"steps": 24000, "batch_size": 32, "lr": 2e-3, "width": 128}
+
+
+def _main_perception(args: argparse.Namespace) -> int:
+    """The learned eyes, trained on one frames dataset on the CPU."""
+    from cake_drake.learning.data.frames import read_frames
+    from cake_drake.learning.training.perception import FILES, train_perception
+    from cake_drake.outputs.files import OutputDir
+
+    frames = _datasets(args)
+    for folder in frames:  # refused in one line before any folder is made
+        read_frames(folder)
+    if args.device not in ("auto", "cpu"):
+        raise InputError(f"--device {args.device} with --perception: it trains on the CPU")
+    steps = args.steps if args.steps is not None else PERCEPTION_RECIPE["steps"]
+    batch = args.batch_size if args.batch_size is not None else PERCEPTION_RECIPE["batch_size"]
+    if not 1 <= steps <= 10_000_000 or not 1 <= batch <= 4096:
+        raise InputError(f"--steps {steps}, --batch-size {batch}: steps 1 to 10000000, "
+                         "a batch of 1 to 4096 sightings")  # fmt: skip
+    if args.minutes is not None and not 0 < args.minutes <= 10_000:
+        raise InputError(f"--minutes {args.minutes}: more than 0, at most 10000")
+    with OutputDir(args.out, "train", FILES, frames) as staged:
+        info = train_perception(
+            frames, staged, steps, batch, PERCEPTION_RECIPE["lr"], PERCEPTION_RECIPE["width"],
+            args.seed, args.minutes, progress=lambda line: print(line, flush=True),
+        )  # fmt: skip
+        staged.commit()
+    kept = info["kept"]
+    print(f"{args.out}: learned eyes trained {info['steps']} steps on {info['samples']} "
+          f"sightings in {info['minutes']:.1f} min; held out ({info['held_out']}): "
+          f"{kept['median_mm']:.2f} / {kept['p95_mm']:.2f} mm, yaw p95 "
+          f"{kept['yaw_p95_deg']:.2f} deg; run it with --perception "
+          f"learned@{args.out}")  # fmt: skip
     return EXIT_OK
 
 
@@ -488,6 +549,13 @@ MODES: tuple[Mode, ...] = (
         reads=frozenset({"planner", "reward", "blocks", "steps", "batch_size", "device", "seed"}),
         refusal="it is a policy's setting, not the learned planner's",
         main=_main_planner,
+    ),
+    Mode(
+        chooser="perception",
+        whose="the learned eyes'",
+        reads=frozenset({"perception", "minutes", "steps", "batch_size", "device", "seed"}),
+        refusal="it is a policy's setting, not the learned eyes'",
+        main=_main_perception,
     ),
     Mode(
         chooser="residual",

@@ -14,6 +14,7 @@ from cake_drake.formats import save_npz
 from cake_drake.outputs.files import OutputDir
 from cake_drake.outputs.replay import write_replay
 from cake_drake.outputs.worker import OutputWorker
+from cake_drake.perception.learned import checkpoint_of, describe, is_learned
 from cake_drake.scenario import dump_scenario
 from cake_drake.symbolic import fact_str, write_plan
 from cake_drake.world.cameras import renderer_in_use
@@ -109,11 +110,15 @@ def perception_layer(perception) -> dict:
         return {"kind": "truth", "what": "the simulator's own poses, no camera (truth)"}
     views = perception.views()
     cams = ", ".join(f"{c.name} {c.width}x{c.height}" for c in views)
+    noise = ", depth noise" if perception.noise.model != "off" else ""
+    if is_learned(perception.estimator):
+        what = describe(checkpoint_of(perception.estimator))
+        return {"kind": "learned", "what": f"{what}: cubes found by colour, their depth points "
+                f"read by the network (no ICP); cameras {cams}{noise}"}  # fmt: skip
     how = {
         "depth": "cubes found by colour, fitted to depth points (footprint start, ICP)",
         "oracle": "cubes found by the renderer's labels (ground truth), fitted to depth points",
     }[perception.estimator]
-    noise = ", depth noise" if perception.noise.model != "off" else ""
     return {"kind": "classical", "what": f"{perception.estimator}: {how}; cameras {cams}{noise}"}
 
 

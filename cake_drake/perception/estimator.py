@@ -80,6 +80,9 @@ class Belief:
     lost: dict[str, float | None] = field(default_factory=dict)  # unknown since
     log: list[tuple[float, str, RigidTransform, bool]] = field(default_factory=list)
     frames: int = 0
+    #: Every cube's world points and their rays at each frame, (t, cube, points, rays):
+    #: kept only where asked (the learned estimator's data), else None.
+    points: list[tuple[float, str, np.ndarray, np.ndarray]] | None = None
 
 
 @dataclass(frozen=True)
@@ -127,6 +130,8 @@ class CubeEstimator(LeafSystem):
         seed: int,
         rate_hz: float,
         labels: dict[str, int] | None = None,
+        network=None,
+        keep_points: bool = False,
     ) -> None:
         super().__init__()
         self._plant = plant
@@ -137,6 +142,9 @@ class CubeEstimator(LeafSystem):
         self._names = list(self._cubes)
         self._colours = np.array([colours[n] for n in self._names], float) * 255
         self._labels = labels  # name -> render label (the oracle)
+        #: A :class:`~cake_drake.perception.learned.PoseNetwork` answers each cube's pose
+        #: in place of the fit and the settling (None: the classical estimator).
+        self._network = network
         self._views = [view_of(c) for c in cameras]
         self._noise = noise
         # Inliers within the noise-free tolerance, widened to 2.5 sigma of the noise at
@@ -162,7 +170,9 @@ class CubeEstimator(LeafSystem):
                 f"depth_{name}", AbstractValue.Make(ImageDepth32F(w, h))
             )
             self._image_ports.append((image, depth))
-        self._belief = self.DeclareAbstractState(AbstractValue.Make(Belief()))
+        self._belief = self.DeclareAbstractState(
+            AbstractValue.Make(Belief(points=[] if keep_points else None))
+        )
         n_bodies = plant.num_bodies()
         self.DeclareAbstractOutputPort(
             "body_poses",
@@ -219,9 +229,11 @@ class CubeEstimator(LeafSystem):
         return frame
 
     def _measure(self, context, X_WH: RigidTransform, t: float):
-        """Per cube, its world points from every camera; and per camera, what a carried
-        cube's visibility check needs (depth image, camera pose, intrinsics)."""
+        """Per cube, its world points from every camera, the unit rays they were seen
+        along and the cameras' places; and per camera, what a carried cube's visibility
+        check needs (depth image, camera pose, intrinsics)."""
         points = {n: [] for n in self._names}
+        rays = {n: [] for n in self._names}
         viewpoints = {n: [] for n in self._names}
         depths = []
         rng = np.random.default_rng([self._seed & 0xFFFFFFFF, round(t * 1e4)])
@@ -245,9 +257,12 @@ class CubeEstimator(LeafSystem):
                 p_C = back_project(depth, v.intrinsics, rows[pick], cols[pick])
                 if len(p_C):
                     name = self._names[k]
-                    points[name].append(X_WC.multiply(p_C.T).T)
+                    p_W = X_WC.multiply(p_C.T).T
+                    ray = p_W - X_WC.translation()
+                    points[name].append(p_W)
+                    rays[name].append(ray / np.linalg.norm(ray, axis=1, keepdims=True))
                     viewpoints[name].append(X_WC.translation())
-        return points, viewpoints, depths
+        return points, rays, viewpoints, depths
 
     def _label_indices(self, label: np.ndarray) -> np.ndarray:
         out = np.full(label.shape, -1, np.int32)
@@ -259,7 +274,7 @@ class CubeEstimator(LeafSystem):
         _, X_WG, fingers = self._robot(context)
         X_WH = X_WG @ X_HAND_GRASP.inverse()
         gripping = GRIP_RANGE[0] <= fingers <= GRIP_RANGE[1]
-        points, viewpoints, depths = self._measure(context, X_WH, t)
+        points, rays, viewpoints, depths = self._measure(context, X_WH, t)
         cubes = {}
         fits, predictions = {}, {}
         for name in self._names:
@@ -268,11 +283,18 @@ class CubeEstimator(LeafSystem):
                 X_last, _, _, X_GB = last
                 predictions[name] = X_WG @ X_GB if (X_GB is not None and gripping) else X_last
             if points[name]:
-                P, eye = np.vstack(points[name]), np.mean(viewpoints[name], axis=0)
-                fit = fit_cube(P, eye, predictions.get(name), self._tol)
+                P, ray = np.vstack(points[name]), np.vstack(rays[name])
+                if belief.points is not None:
+                    belief.points.append((t, name, P, ray))
+                if self._network is not None:
+                    fit = self._network.fit(P, ray, predictions.get(name))
+                else:
+                    eye = np.mean(viewpoints[name], axis=0)
+                    fit = fit_cube(P, eye, predictions.get(name), self._tol)
                 if fit is not None:
                     fits[name] = fit
-        fits = settle(fits, {n: X for n, X in predictions.items() if n not in belief.lost})
+        if self._network is None:
+            fits = settle(fits, {n: X for n, X in predictions.items() if n not in belief.lost})
         for name in self._names:
             last, predicted = belief.last.get(name), predictions.get(name)
             fit = fits.get(name)

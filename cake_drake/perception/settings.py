@@ -6,15 +6,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cake_drake import artifacts
 from cake_drake.errors import InputError
+from cake_drake.perception.learned import checkpoint_of, is_learned
 from cake_drake.world.cameras import Camera, camera_pose, check_cameras
 from cake_drake.world.scene import TABLE_HALF_WIDTH, TABLE_X
 
 #: The estimators, by name: ``truth`` reads the simulator's own poses (today's run, bit
 #: for bit); ``depth`` finds the cubes in the cameras' colour images and fits each to its
 #: depth points; ``oracle`` fits the same way to the renderer's label image (ground-truth
-#: segmentation: for finding which half of ``depth`` is wrong, never a result).
-ESTIMATORS = ("truth", "depth", "oracle")
+#: segmentation: for finding which half of ``depth`` is wrong, never a result);
+#: ``learned`` (or ``learned@DIR``) answers each cube's pose from the same points with a
+#: network instead of the fit (:mod:`cake_drake.perception.learned`).
+ESTIMATORS = ("truth", "depth", "oracle", "learned")
 NOISE_MODELS = ("off", "axial")
 
 
@@ -46,13 +50,16 @@ def default_cameras() -> list[Camera]:
 class Perception:
     """Where the cake's knowledge of the cubes comes from."""
 
-    estimator: str = "truth"  # truth | depth | oracle
+    estimator: str = "truth"  # truth | depth | oracle | learned | learned@DIR
     #: The perception cameras (empty: :func:`default_cameras`); each gives colour and depth.
     cameras: list[Camera] = field(default_factory=list)
     noise: DepthNoise = field(default_factory=DepthNoise)
     #: Hz: the cameras' frame rate. An estimate asked for within one frame of the last
     #: is that frame's (with its age); the world is rendered only when asked.
     rate_hz: float = 30.0
+    #: Keep every cube's points of every frame with the truth beside them (the learned
+    #: estimator's data: ``python -m cake_drake.record --frames``).
+    keep_points: bool = False
 
     def views(self) -> "list[Camera]":
         """The cameras in use."""
@@ -61,9 +68,10 @@ class Perception:
 
 def check_perception(p: Perception) -> None:
     """Refuse a ``perception:`` section that cannot work, before anything is built."""
-    if p.estimator not in ESTIMATORS:
+    if p.estimator not in ESTIMATORS and not is_learned(p.estimator):
         raise InputError(
-            f"perception.estimator {p.estimator!r}; choose one of: {', '.join(ESTIMATORS)}"
+            f"perception.estimator {p.estimator!r}; choose one of: {', '.join(ESTIMATORS)}, "
+            "learned@DIR"
         )
     if p.noise.model not in NOISE_MODELS:
         raise InputError(
@@ -84,6 +92,9 @@ def check_perception(p: Perception) -> None:
                 f"the table (x {TABLE_X[0]} to {TABLE_X[1]} m, y within "
                 f"+-{TABLE_HALF_WIDTH} m, z = 0); turn it towards the table"
             )
+    if is_learned(p.estimator):
+        artifacts.check(checkpoint_of(p.estimator), "perception",
+                        role="perception.estimator", cameras=views)  # fmt: skip
 
 
 def sees_table(camera: Camera) -> bool:
