@@ -276,7 +276,7 @@ class CubeEstimator(LeafSystem):
         gripping = GRIP_RANGE[0] <= fingers <= GRIP_RANGE[1]
         points, rays, viewpoints, depths = self._measure(context, X_WH, t)
         cubes = {}
-        fits, predictions = {}, {}
+        fits, predictions, asked = {}, {}, {}
         for name in self._names:
             last = belief.last.get(name)
             if last is not None:
@@ -287,13 +287,15 @@ class CubeEstimator(LeafSystem):
                 if belief.points is not None:
                     belief.points.append((t, name, P, ray))
                 if self._network is not None:
-                    fit = self._network.fit(P, ray, predictions.get(name))
-                else:
-                    eye = np.mean(viewpoints[name], axis=0)
-                    fit = fit_cube(P, eye, predictions.get(name), self._tol)
+                    asked[name] = (P, ray, predictions.get(name))
+                    continue
+                eye = np.mean(viewpoints[name], axis=0)
+                fit = fit_cube(P, eye, predictions.get(name), self._tol)
                 if fit is not None:
                     fits[name] = fit
-        if self._network is None:
+        if self._network is not None:  # every cube of the frame in one question
+            fits = self._network.fit_all(asked)
+        else:
             fits = settle(fits, {n: X for n, X in predictions.items() if n not in belief.lost})
         for name in self._names:
             last, predicted = belief.last.get(name), predictions.get(name)

@@ -109,8 +109,10 @@ class PoseNetwork:
         w = self.weights
         h1 = np.maximum(x @ w["w1"] + w["b1"], 0.0)
         h2 = np.maximum(h1 @ w["w2"] + w["b2"], 0.0)
-        g = np.broadcast_to(h2.max(axis=1, keepdims=True), h2.shape)
-        h3 = np.maximum(np.concatenate([h1, g], axis=-1) @ w["w3"] + w["b3"], 0.0)
+        # [h1, g] @ w3, with the global feature g's part computed once a cube, not a point
+        half = h1.shape[-1]
+        g = h2.max(axis=1, keepdims=True) @ w["w3"][half:] + w["b3"]
+        h3 = np.maximum(h1 @ w["w3"][:half] + g, 0.0)
         h4 = np.maximum(h3 @ w["w4"] + w["b4"], 0.0)
         return h4 @ w["w5"] + w["b5"]
 
@@ -118,20 +120,29 @@ class PoseNetwork:
         """A cube's pose from its world points and their rays, level, its yaw the one of
         four nearest the start's (or the cube's bearing from the robot's base, as the
         classical fit's); None where too few points are near their median."""
-        prepared = point_features(points, rays)
-        if prepared is None:
-            return None
-        x, median, n = prepared
-        centre, c4, s4 = vote(x, self.answer(x[None])[0])
-        centre = median + HALF * centre
-        yaw = math.atan2(s4, c4) / 4
-        if start is not None:
-            R = start.rotation().matrix()
-            ref = math.atan2(R[1, 0], R[0, 0])
-        else:
-            ref = math.atan2(centre[1], centre[0])
-        yaw += (math.pi / 2) * round((ref - yaw) / (math.pi / 2))
-        return Fit(RigidTransform(RotationMatrix.MakeZRotation(yaw), centre), n, 0.0)
+        return self.fit_all({"": (points, rays, start)}).get("")
+
+    def fit_all(self, cubes: dict) -> dict[str, Fit]:
+        """:meth:`fit` of every cube of a frame (``name -> (points, rays, start)``), the
+        network asked once for all of them; a cube with too few points is left out."""
+        prepared = {n: (point_features(P, r), start) for n, (P, r, start) in cubes.items()}
+        prepared = {n: (p, start) for n, (p, start) in prepared.items() if p is not None}
+        if not prepared:
+            return {}
+        answers = self.answer(np.stack([p[0] for p, _ in prepared.values()]))
+        fits = {}
+        for (name, ((x, median, n), start)), a in zip(prepared.items(), answers, strict=True):
+            centre, c4, s4 = vote(x, a)
+            centre = median + HALF * centre
+            yaw = math.atan2(s4, c4) / 4
+            if start is not None:
+                R = start.rotation().matrix()
+                ref = math.atan2(R[1, 0], R[0, 0])
+            else:
+                ref = math.atan2(centre[1], centre[0])
+            yaw += (math.pi / 2) * round((ref - yaw) / (math.pi / 2))
+            fits[name] = Fit(RigidTransform(RotationMatrix.MakeZRotation(yaw), centre), n, 0.0)
+        return fits
 
 
 def _bad(path: Path, what: str) -> InputError:
