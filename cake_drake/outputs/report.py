@@ -113,8 +113,8 @@ def perception_layer(perception) -> dict:
     noise = ", depth noise" if perception.noise.model != "off" else ""
     if is_learned(perception.estimator):
         what = describe(checkpoint_of(perception.estimator))
-        return {"kind": "learned", "what": f"{what}: cubes found by colour, their depth points "
-                f"read by the network (no ICP); cameras {cams}{noise}"}  # fmt: skip
+        return {"kind": "learned", "what": f"{what}: depth points found by colour, no ICP; "
+                f"cameras {cams}{noise}"}  # fmt: skip
     how = {
         "depth": "cubes found by colour, fitted to depth points (footprint start, ICP)",
         "oracle": "cubes found by the renderer's labels (ground truth), fitted to depth points",

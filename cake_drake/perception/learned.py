@@ -232,7 +232,7 @@ def check_folder(path: str | Path, cameras: list[Camera] | None = None) -> PoseN
 def describe(path: str | Path) -> str:
     net = load(path)
     frames = net.config.get("training", {}).get("samples", "?")
-    return f"learned eyes ({Path(path).name}: a point network, {frames} cube sightings)"
+    return f"learned eyes ({Path(path).name}: a point network, {frames} sightings)"
 
 
 def checkpoint_of(spec: str) -> Path:
