@@ -145,6 +145,7 @@ class CubeEstimator(LeafSystem):
         #: A :class:`~cake_drake.perception.learned.PoseNetwork` answers each cube's pose
         #: in place of the fit and the settling (None: the classical estimator).
         self._network = network
+        self._rays = network is not None or keep_points
         self._views = [view_of(c) for c in cameras]
         self._noise = noise
         # Inliers within the noise-free tolerance, widened to 2.5 sigma of the noise at
@@ -258,10 +259,11 @@ class CubeEstimator(LeafSystem):
                 if len(p_C):
                     name = self._names[k]
                     p_W = X_WC.multiply(p_C.T).T
-                    ray = p_W - X_WC.translation()
                     points[name].append(p_W)
-                    rays[name].append(ray / np.linalg.norm(ray, axis=1, keepdims=True))
                     viewpoints[name].append(X_WC.translation())
+                    if self._rays:  # only the network and the data read them
+                        ray = p_W - X_WC.translation()
+                        rays[name].append(ray / np.linalg.norm(ray, axis=1, keepdims=True))
         return points, rays, viewpoints, depths
 
     def _label_indices(self, label: np.ndarray) -> np.ndarray:
@@ -283,7 +285,8 @@ class CubeEstimator(LeafSystem):
                 X_last, _, _, X_GB = last
                 predictions[name] = X_WG @ X_GB if (X_GB is not None and gripping) else X_last
             if points[name]:
-                P, ray = np.vstack(points[name]), np.vstack(rays[name])
+                P = np.vstack(points[name])
+                ray = np.vstack(rays[name]) if self._rays else None
                 if belief.points is not None:
                     belief.points.append((t, name, P, ray))
                 if self._network is not None:
