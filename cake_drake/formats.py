@@ -9,10 +9,14 @@ and checks each one's shape against the caller's expectation. Every failure is o
 :class:`InputError` line naming the file, the array and what would be valid; nothing
 is unpickled. The kinds' own checks (times that increase, seven joints) stay with their
 readers: :func:`load_npz` here, :func:`cake_drake.learning.training.residual.load_logs`.
+
+:func:`bounded_bytes` is the one bounded read of a whole file, and :class:`WeightsFolder`
+the one reader of the NumPy checkpoints (the learned planner, the learned eyes).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import zipfile
 import zlib
@@ -173,6 +177,96 @@ def read_npz(
             return {name: np.asarray(data[name]) for name in wanted}
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         raise InputError(f"{path}: unreadable ({e}); {expected}") from None
+
+
+def bounded_bytes(path: Path, bad) -> bytes:
+    """A file's bytes; one over :data:`MAX_INPUT_BYTES` is refused unread (``bad(path, what)``
+    makes the one-line error), bounded even if the file grows while it is read."""
+    try:
+        size = path.stat().st_size
+        if size > MAX_INPUT_BYTES:
+            raise bad(path, f"{size / 1e6:.0f} MB is too large "
+                            f"(at most {MAX_INPUT_BYTES // 2**20} MiB)")  # fmt: skip
+        with path.open("rb") as f:
+            data = f.read(MAX_INPUT_BYTES + 1)
+    except OSError as e:
+        raise bad(path, f"unreadable ({e.strerror or e})") from None
+    if len(data) > MAX_INPUT_BYTES:
+        raise bad(path, f"too large (more than {MAX_INPUT_BYTES // 2**20} MiB)")
+    return data
+
+
+class WeightsFolder:
+    """The one checked reader of the project's NumPy checkpoints (the learned planner, the
+    learned eyes): a folder holding a JSON description (``config``) and ``weights.npz``.
+
+    :meth:`digest` checks the folder and both files (each bounded) and returns their
+    bytes' digest, the key a loader caches on; :meth:`read` parses the description
+    (``check(path, cfg)`` checks its fields), then reads exactly the arrays
+    ``shapes(cfg)`` names, each of its shape, all finite, nothing unpickled. Every
+    failure is one :class:`InputError` line: ``PATH: not a NOUN: what``.
+    """
+
+    WEIGHTS = "weights.npz"
+
+    def __init__(self, noun: str, config: str, check, shapes, dtype=np.float64) -> None:
+        self.noun, self.config, self.check, self.shapes, self.dtype = (
+            noun, config, check, shapes, dtype
+        )  # fmt: skip
+
+    def bad(self, path: Path, what: str) -> InputError:
+        return InputError(f"{path}: not a {self.noun}: {what}")
+
+    def digest(self, folder: Path) -> str:
+        holds = f"{self.config} and {self.WEIGHTS}"
+        if not folder.exists():
+            raise InputError(f"{folder}: no such folder; a {self.noun} is a folder of {holds}")
+        if not folder.is_dir():
+            raise InputError(f"{folder}: not a folder; a {self.noun} is a folder of {holds}")
+        h = hashlib.sha256()
+        for name in (self.config, self.WEIGHTS):
+            p = folder / name
+            if not p.is_file():
+                raise self.bad(folder, f"{name} is missing (it holds {holds})")
+            h.update(bounded_bytes(p, self.bad))
+        return h.hexdigest()
+
+    def read(self, folder: Path) -> tuple[dict, dict[str, np.ndarray]]:
+        cfg_path, w_path = folder / self.config, folder / self.WEIGHTS
+        try:
+            cfg = json.loads(bounded_bytes(cfg_path, self.bad).decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as e:
+            where = f" (line {e.lineno})" if isinstance(e, json.JSONDecodeError) else ""
+            raise self.bad(cfg_path, f"unreadable JSON{where}: {e}") from None
+        if not isinstance(cfg, dict):
+            raise self.bad(cfg_path, f"the file holds a {type(cfg).__name__}, not a mapping")
+        self.check(cfg_path, cfg)
+        expected = self.shapes(cfg)
+        what = f"expected the weights of this {self.noun} ({cfg_path.name})"
+        try:
+            # Every array by its header first (nothing decompressed): exactly the
+            # architecture's arrays, each of its shape; then only those are read.
+            headers = npz_headers(w_path, what)
+            missing = [k for k in expected if k not in headers]
+            extra = sorted(set(headers) - set(expected))
+            if missing or extra:
+                raise InputError(
+                    f"{w_path}: {cfg_path.name} asks for {', '.join(expected)}"
+                    + (f"; missing {', '.join(missing)}" if missing else "")
+                    + (f"; unknown {', '.join(extra)}" if extra else "")
+                )
+            for k, shape in expected.items():
+                if headers[k][0] != shape:
+                    raise InputError(f"{w_path}: array {k} has shape {headers[k][0]}, but "
+                                     f"{cfg_path.name} asks for {shape}")  # fmt: skip
+            arrays = read_npz(w_path, what, expected)
+        except InputError as e:
+            raise self.bad(w_path, str(e).removeprefix(f"{w_path}: ")) from None
+        weights = {k: np.asarray(arrays[k], self.dtype) for k in expected}
+        for k, a in weights.items():
+            if not np.isfinite(a).all():
+                raise self.bad(w_path, f"array {k} holds NaN or infinite values")
+        return cfg, weights
 
 
 def save_npz(path: str | Path, samples: dict[str, np.ndarray], actions: list[str]) -> None:

@@ -17,8 +17,6 @@ checks both. Inference is NumPy's; training is :mod:`cake_drake.learning.trainin
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -28,7 +26,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 
 from cake_drake.errors import InputError
-from cake_drake.formats import MAX_INPUT_BYTES, check_format, read_npz
+from cake_drake.formats import WeightsFolder, check_format
 from cake_drake.paths import PACKAGE, resolve_path
 from cake_drake.perception.fit import HALF, MIN_INLIERS, REACH, Fit
 from cake_drake.world.cameras import Camera
@@ -145,51 +143,28 @@ class PoseNetwork:
         return fits
 
 
-def _bad(path: Path, what: str) -> InputError:
-    return InputError(f"{path}: not a learned cube estimator: {what}")
-
-
-def _read_config(path: Path) -> dict:
-    try:
-        if path.stat().st_size > MAX_INPUT_BYTES:
-            raise _bad(path, "too large")
-        cfg = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise _bad(path, f"unreadable ({e})") from None
-    if not isinstance(cfg, dict):
-        raise _bad(path, f"the file holds a {type(cfg).__name__}, not a mapping")
+def _check_config(path: Path, cfg: dict) -> None:
+    bad = READER.bad
     if cfg.get("kind") != KIND:
-        raise _bad(path, f"field 'kind' is {cfg.get('kind')!r:.60}, expected {KIND!r}")
+        raise bad(path, f"field 'kind' is {cfg.get('kind')!r:.60}, expected {KIND!r}")
     check_format(cfg, path, (FORMAT,))
     width = cfg.get("width")
     if type(width) is not int or not 2 <= width <= 1024 or width % 2:
-        raise _bad(path, f"field 'width' is {width!r:.40}; an even whole number 2 to 1024")
+        raise bad(path, f"field 'width' is {width!r:.40}; an even whole number 2 to 1024")
     cams = cfg.get("cameras")
     if not isinstance(cams, list) or not cams or not all(isinstance(c, dict) for c in cams):
-        raise _bad(path, "field 'cameras' must list the cameras it was trained with")
+        raise bad(path, "field 'cameras' must list the cameras it was trained with")
     for i, c in enumerate(cams):
         missing = [f for f in CAMERA_FIELDS if f not in c]
         if missing:
-            raise _bad(path, f"cameras[{i}] lacks {', '.join(missing)}")
-    return cfg
+            raise bad(path, f"cameras[{i}] lacks {', '.join(missing)}")
 
 
-@lru_cache(maxsize=4)
-def _load(folder: Path, digest: str) -> PoseNetwork:
-    del digest  # the cache's key: the same bytes are the same checkpoint
-    cfg_path, w_path = folder / "perception.json", folder / "weights.npz"
-    cfg = _read_config(cfg_path)
-    shapes = weight_shapes(cfg["width"])
-    what = f"expected the weights of a cube estimator of width {cfg['width']} ({cfg_path.name})"
-    try:
-        arrays = read_npz(w_path, what, shapes)
-    except InputError as e:
-        raise _bad(w_path, str(e).removeprefix(f"{w_path}: ")) from None
-    weights = {k: np.asarray(arrays[k], np.float32) for k in shapes}
-    for k, a in weights.items():
-        if not np.isfinite(a).all():
-            raise _bad(w_path, f"array {k} holds NaN or infinite values")
-    return PoseNetwork(folder, cfg, weights)
+#: The checked reader of an estimator's folder (:class:`cake_drake.formats.WeightsFolder`).
+READER = WeightsFolder(
+    "learned cube estimator", "perception.json", _check_config,
+    lambda cfg: weight_shapes(cfg["width"]), np.float32,
+)  # fmt: skip
 
 
 def load(path: str | Path) -> PoseNetwork:
@@ -198,18 +173,13 @@ def load(path: str | Path) -> PoseNetwork:
     must hold exactly its architecture's arrays, finite numbers, read by the project's
     checked reader (nothing unpickled)."""
     folder = Path(path)
-    if not folder.is_dir():
-        raise InputError(f"{folder}: no such learned cube estimator folder "
-                         "(perception.json, weights.npz)")  # fmt: skip
-    digest = hashlib.sha256()
-    for name in ("perception.json", "weights.npz"):
-        p = folder / name
-        if not p.is_file():
-            raise _bad(folder, f"{name} is missing (it holds perception.json and weights.npz)")
-        if p.stat().st_size > MAX_INPUT_BYTES:
-            raise _bad(p, f"{p.stat().st_size / 1e6:.0f} MB is too large")
-        digest.update(p.read_bytes())
-    return _load(folder.resolve(), digest.hexdigest())
+    return _load(folder.resolve(), READER.digest(folder))
+
+
+@lru_cache(maxsize=4)
+def _load(folder: Path, digest: str) -> PoseNetwork:
+    del digest  # the cache's key: the same bytes are the same checkpoint
+    return PoseNetwork(folder, *READER.read(folder))
 
 
 def check_folder(path: str | Path, cameras: list[Camera] | None = None) -> PoseNetwork:

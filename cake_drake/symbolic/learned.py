@@ -29,8 +29,6 @@ against each other before anything plans with them.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -41,7 +39,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from cake_drake.errors import InputError, NoPlanError
-from cake_drake.formats import MAX_INPUT_BYTES, check_format, npz_headers, read_npz
+from cake_drake.formats import WeightsFolder, check_format
 from cake_drake.paths import MODELS_DIR, portable_path, resolve_path
 from cake_drake.symbolic.diagnose import diagnose
 from cake_drake.symbolic.grounding import check_action, ground_all, relaxed_reachable
@@ -305,22 +303,16 @@ class LearnedPlanner:
         return int(self.config["architecture"]["width"])
 
 
-def _bad(path: Path, what: str) -> InputError:
-    return InputError(f"{path}: not a learned planner checkpoint: {what}")
-
-
-def _check_config(cfg_path: Path, cfg: object) -> dict:
-    if not isinstance(cfg, dict):
-        raise _bad(cfg_path, f"the file holds a {type(cfg).__name__}, not a mapping")
+def _check_config(cfg_path: Path, cfg: dict) -> dict:
     if cfg.get("kind") != KIND:
-        raise _bad(cfg_path, f"field 'kind' is {cfg.get('kind')!r}, expected {KIND!r}")
+        raise READER.bad(cfg_path, f"field 'kind' is {cfg.get('kind')!r}, expected {KIND!r}")
     check_format(cfg, cfg_path, (FORMAT,))
     arch = cfg.get("architecture")
     if not isinstance(arch, dict):
-        raise _bad(cfg_path, "field 'architecture' is missing or not a mapping")
+        raise READER.bad(cfg_path, "field 'architecture' is missing or not a mapping")
     width = arch.get("width")
     if not isinstance(width, int) or isinstance(width, bool) or not 1 <= width <= 1024:
-        raise _bad(cfg_path, f"field 'architecture.width' is {width!r}; an integer 1 to 1024")
+        raise READER.bad(cfg_path, f"field 'architecture.width' is {width!r}; an integer 1 to 1024")
     for key, expected in (
         ("node_features", NODE_FEATURES),
         ("global_features", GLOBAL_FEATURES),
@@ -328,7 +320,7 @@ def _check_config(cfg_path: Path, cfg: object) -> dict:
         ("pair_features", PAIR_FEATURES),
     ):
         if arch.get(key) != list(expected):
-            raise _bad(
+            raise READER.bad(
                 cfg_path,
                 f"field 'architecture.{key}' is {arch.get(key)!r}; this version reads "
                 f"{list(expected)}",
@@ -336,98 +328,30 @@ def _check_config(cfg_path: Path, cfg: object) -> dict:
     return cfg
 
 
+#: The checked reader of a learned planner's folder (:class:`cake_drake.formats.WeightsFolder`).
+READER = WeightsFolder(
+    "learned planner checkpoint", "planner.json", _check_config,
+    lambda cfg: weight_shapes(cfg["architecture"]["width"]),
+)  # fmt: skip
+
+
 def load_planner(path: str | Path) -> LearnedPlanner:
     """Read and check a learned planner's folder; :class:`InputError` naming the file and field.
 
     ``planner.json`` must say it is a learned planner of this format, with an
     architecture this version reads; ``weights.npz`` must hold exactly the arrays
-    that architecture needs, with their shapes, all finite numbers. Either file over
-    :data:`~cake_drake.formats.MAX_INPUT_BYTES` is refused unread, and the
-    weights are read by the project's one checked reader
-    (:func:`cake_drake.formats.read_npz`): every array is looked at by its npy header
-    before anything is decompressed, and nothing is unpickled. Checked checkpoints are
-    remembered by their files' bytes (a digest), never by their names or times.
+    that architecture needs, with their shapes, all finite numbers, read by the project's
+    one checked reader (:class:`cake_drake.formats.WeightsFolder`). Checked checkpoints
+    are remembered by their files' bytes (a digest), never by their names or times.
     """
     folder = Path(path)
-    if not folder.exists():
-        raise InputError(f"{folder}: no such learned planner folder")
-    if not folder.is_dir():
-        raise InputError(f"{folder}: a learned planner is a folder (planner.json, weights.npz)")
-    digest = hashlib.sha256()
-    for name in ("planner.json", "weights.npz"):
-        p = folder / name
-        if not p.is_file():
-            raise _bad(
-                folder, f"{name} is missing (a checkpoint holds planner.json and weights.npz)"
-            )
-        digest.update(_bounded_bytes(p))
-    return _load_checked(folder, digest.hexdigest())
-
-
-def _bounded_bytes(p: Path) -> bytes:
-    """A checkpoint file's bytes; one over :data:`MAX_INPUT_BYTES` is refused unread."""
-    try:
-        size = p.stat().st_size
-        if size > MAX_INPUT_BYTES:
-            raise _bad(
-                p, f"{size / 1e6:.0f} MB is too large (at most {MAX_INPUT_BYTES // 2**20} MiB)"
-            )
-        with p.open("rb") as f:  # bounded even if the file grows meanwhile
-            data = f.read(MAX_INPUT_BYTES + 1)
-    except OSError as e:
-        raise _bad(p, f"unreadable ({e.strerror or e})") from None
-    if len(data) > MAX_INPUT_BYTES:
-        raise _bad(p, f"too large (more than {MAX_INPUT_BYTES // 2**20} MiB)")
-    return data
-
-
-def _checked_npz(w_path: Path, read):
-    """``read()`` (a call of :mod:`cake_drake.formats`), its one-line refusal said as a
-    checkpoint's."""
-    try:
-        return read()
-    except InputError as e:
-        raise _bad(w_path, str(e).removeprefix(f"{w_path}: ")) from None
+    return _load_checked(folder, READER.digest(folder))
 
 
 @lru_cache(maxsize=8)
 def _load_checked(folder: Path, digest: str) -> LearnedPlanner:
     del digest  # the cache's key: the same bytes are the same checkpoint
-    cfg_path, w_path = folder / "planner.json", folder / "weights.npz"
-    try:
-        cfg = json.loads(_bounded_bytes(cfg_path).decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        where = f" (line {e.lineno})" if isinstance(e, json.JSONDecodeError) else ""
-        raise _bad(cfg_path, f"unreadable JSON{where}: {e}") from None
-    cfg = _check_config(cfg_path, cfg)
-    width = cfg["architecture"]["width"]
-    expected = weight_shapes(width)
-    what = f"expected the weights of a learned planner of width {width} ({cfg_path.name})"
-    # Every array by its header first (nothing decompressed): exactly the arrays of the
-    # architecture, each of its shape; then read_npz reads them, numbers only.
-    headers = _checked_npz(w_path, lambda: npz_headers(w_path, what))
-    missing = [k for k in expected if k not in headers]
-    extra = sorted(set(headers) - set(expected))
-    if missing or extra:
-        raise _bad(
-            w_path,
-            f"for width {width} ({cfg_path.name}) it should hold {', '.join(expected)}"
-            + (f"; missing {', '.join(missing)}" if missing else "")
-            + (f"; unknown {', '.join(extra)}" if extra else ""),
-        )
-    for k, shape in expected.items():
-        if headers[k][0] != shape:
-            raise _bad(
-                w_path,
-                f"array {k} has shape {headers[k][0]}, but width {width} "
-                f"({cfg_path.name}) needs {shape}",
-            )
-    arrays = _checked_npz(w_path, lambda: read_npz(w_path, what, expected))
-    weights = {k: np.asarray(arrays[k], np.float64) for k in expected}
-    for k, a in weights.items():
-        if not np.isfinite(a).all():
-            raise _bad(w_path, f"array {k} holds NaN or infinite values")
-    return LearnedPlanner(folder, cfg, weights)
+    return LearnedPlanner(folder, *READER.read(folder))
 
 
 def checkpoint_of(spec: str) -> Path:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cake_drake.errors import InputError, PddlError
-from cake_drake.formats import MAX_INPUT_BYTES
+from cake_drake.formats import bounded_bytes
 from cake_drake.paths import check_holdable
 
 
@@ -59,9 +59,9 @@ def read_text(path: str | Path, what: str = "file", allow_empty: bool = False) -
     """Return the text of ``path``, or raise one-line :class:`InputError`.
 
     Missing files, directories, devices, unreadable files, files over
-    :data:`MAX_INPUT_BYTES` (refused unread; a pipe is read up to the bound), binary data
-    (NUL bytes or invalid UTF-8) and, unless ``allow_empty``, files with nothing but
-    whitespace are refused here. Every file the project reads comes through here.
+    :data:`cake_drake.formats.MAX_INPUT_BYTES` (refused unread; a pipe is read up to the
+    bound), binary data (NUL bytes or invalid UTF-8) and, unless ``allow_empty``, files
+    with nothing but whitespace are refused here. Every file the project reads comes through here.
     """
     check_holdable(str(path))
     p = Path(path).expanduser()
@@ -71,19 +71,7 @@ def read_text(path: str | Path, what: str = "file", allow_empty: bool = False) -
         raise InputError(f"{path}: is a directory, expected a {what}")
     if p.is_char_device() or p.is_block_device() or p.is_socket():
         raise InputError(f"{path}: is a device or socket, not a {what}")
-    try:
-        size = p.stat().st_size
-        if size > MAX_INPUT_BYTES:
-            raise InputError(
-                f"{path}: {size / 1e6:.0f} MB is too large for a {what} "
-                f"(at most {MAX_INPUT_BYTES // 2**20} MiB)"
-            )
-        with p.open("rb") as f:  # bounded even if the file grows or is a pipe
-            data = f.read(MAX_INPUT_BYTES + 1)
-    except OSError as e:
-        raise InputError(f"{path}: cannot read {what}: {e.strerror or e}") from None
-    if len(data) > MAX_INPUT_BYTES:
-        raise InputError(f"{path}: too large for a {what} (more than 16 MiB)")
+    data = bounded_bytes(p, lambda _, why: InputError(f"{path}: {why}; expected a {what}"))
     nul = data.find(b"\x00")
     if nul >= 0:
         raise InputError(f"{path}: not a text file (NUL byte at offset {nul}); expected a {what}")

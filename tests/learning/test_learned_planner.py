@@ -145,13 +145,13 @@ def _damaged(tmp_path: Path, how: str) -> Path:
 @pytest.mark.parametrize(
     "how, words",
     [
-        ("missing", "no such learned planner folder"),
+        ("missing", "no such folder; a learned planner checkpoint is a folder of planner.json"),
         ("empty", "planner.json is missing"),
         ("truncated", "weights.npz: not a learned planner checkpoint: not a readable .npz"),
         ("not json", "planner.json: not a learned planner checkpoint: unreadable JSON (line 1)"),
         ("not a mapping", "holds a list, not a mapping"),
         ("other kind", "field 'kind' is 'a policy'"),
-        ("other width", "array enc_w has shape (10, 64), but width 32"),
+        ("other width", "array enc_w has shape (10, 64), but planner.json asks for (10, 32)"),
         ("nan", "array enc_w holds NaN"),
         ("missing array", "missing bi_p"),
     ],
