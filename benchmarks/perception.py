@@ -35,6 +35,7 @@ time for each frame's cubes. ``--figure PNG`` draws one frame with both outlines
     python benchmarks/perception.py --frames --episodes 10 --rows problem_5 tall10
     python benchmarks/perception.py --episodes 50 --rows problem_5 --columns learned learned+noise
     python benchmarks/perception.py --episodes 50 --rows learned_cake --skills --columns learned
+        --json cake.json            # then, stopped early, the same with --resume to go on
     python benchmarks/perception.py --figure docs/images/perception_learned.png --episodes 1
 """
 
@@ -248,6 +249,7 @@ def main(argv=None) -> int:
     ap.add_argument("--dev", action="store_true", help="the development seeds instead")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", type=Path, help="also write every episode's row here")
+    ap.add_argument("--resume", action="store_true", help="run only what --json lacks")
     ap.add_argument("--eyes", default=EYES, help="the learned columns' estimator (learned@DIR)")
     ap.add_argument("--figure", type=Path, help="draw one frame with both estimators here")
     ap.add_argument(
@@ -272,26 +274,35 @@ def main(argv=None) -> int:
             for s in seeds]  # fmt: skip
     t0 = time.perf_counter()
     done = []
+    if args.resume:
+        if not (args.json and args.json.is_file()):
+            ap.error("--resume reads the episodes of --json FILE: give an existing file")
+        done = json.loads(args.json.read_text())
+        kept = {(d["row"], d["column"], d["seed"]) for d in done}
+        jobs = [j for j in jobs if j[:3] not in kept]
+        print(f"{args.json}: {len(done)} episodes kept, {len(jobs)} to run", flush=True)
     for d in imap(episode, jobs, args.workers):  # kept as each finishes: a long table stopped
         done.append(d)  # early still says what it measured
         print(
-            f"{len(done)}/{len(jobs)}: {d['row']} {d['column']} seed {d['seed']}: "
+            f"{len(done)}: {d['row']} {d['column']} seed {d['seed']}: "
             f"{'built' if d['success'] else d.get('message', 'failed')}",
             flush=True,
         )
         if args.json:
             args.json.write_text(json.dumps(done, indent=1) + "\n")
     kind = "development" if args.dev else "test"
+    layer = "learned skills" if skills else "classical"
+    minutes = (time.perf_counter() - t0) / 60
     print(f"\n{args.episodes} episodes a row ({kind} seeds {seeds[0]}-{seeds[-1]}), geometric "
-          f"layer {'learned skills' if skills else 'classical'}, "
-          f"{(time.perf_counter() - t0) / 60:.1f} min on {args.workers} workers\n")  # fmt: skip
+          f"layer {layer}, {minutes:.1f} min on {args.workers} workers (this piece)\n")  # fmt: skip
     print("| row | perception | success | 95 % interval | stacks mm (median / p95) | "
           "error mm (median / p95) | yaw p95 deg | frames | sim s | sim wall s "
           "| failures |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for row in args.rows:
         for col in args.columns:
-            mine = [d for d in done if d["row"] == row and d["column"] == col]
+            mine = [d for d in done if d["row"] == row and d["column"] == col
+                    and d["seed"] in seeds]  # fmt: skip
             wins = sum(d["success"] for d in mine)
             lo, hi = wilson(wins, len(mine))
             places = [p for d in mine for p in d["places_mm"]]

@@ -249,11 +249,9 @@ class SkillEnv(gymnasium.Env):
             return np.asarray(o["observation.relative"], np.float32)
         return np.concatenate([o["observation.state"], o["observation.skill"]]).astype(np.float32)
 
-    def _build(self, seed: int, blocks: int):
-        """The problem of ``seed`` with ``blocks`` cubes checked and planned, and its
-        Diagram built under a new simulator; the checked scenario and the plan."""
-        scenario = self._scenario(seed, blocks)
-        checked = check(scenario, write=False)
+    def _build(self, scenario: Scenario, checked):
+        """The checked problem planned, and its Diagram built under a new simulator;
+        the plan."""
         plan, slots, initial = plan_and_layout(checked)
         self._held = HeldSkill(self._lead)
         self._cake = build_diagram(scenario, checked.problem, initial, plan.actions,
@@ -264,18 +262,19 @@ class SkillEnv(gymnasium.Env):
         root = self._simulator.get_mutable_context()
         set_world_parameters(scene, scene.plant.GetMyMutableContextFromRoot(root),
                              scenario.world, scenario.seed)  # fmt: skip
-        return checked, plan
+        return plan
 
     def _draw(self, seed: int):
         """The problem of ``seed`` built, and the plan's first actions of the kinds: (the
         cube count, their indices), or why there is none (:data:`NO_START`'s key)."""
         rng = np.random.default_rng(seed)
         blocks = int(rng.integers(self.blocks[0], self.blocks[1] + 1))
-        checked = check(self._scenario(seed, blocks), write=False)
+        scenario = self._scenario(seed, blocks)
+        checked = check(scenario, write=False)
         view = blocksworld_view(checked.problem)
         if view.goal <= view.init:
             return "goal", rng, blocks, []
-        checked, plan = self._build(seed, blocks)
+        plan = self._build(scenario, checked)
         roles = blocksworld_roles(checked.problem.domain)
         kinds = [roles.classify(a).canonical().name for a in plan.actions]
         eligible = [k for k, name in enumerate(kinds[: self.horizon]) if name in self.kinds]
