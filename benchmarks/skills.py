@@ -31,9 +31,9 @@ and the failures by their first words; ``--json`` keeps the rows.
     python benchmarks/skills.py --release docs/images/skill_release.png   # the release, drawn
     python benchmarks/skills.py --alone --no-classical --rows problem_5   # the network alone
 
-``--alone`` adds a column of the network alone (``motion.skill_rules: []``), ``--each-off``
-one for each shield step off in turn; a second table says how often each step changed
-the network's answer.
+``--alone`` adds a column of the network alone (``motion.skill_rules: []``), ``--rules
+STEP...`` one with those steps alone, ``--each-off`` one for each shield step off in turn;
+a second table says how often each step changed the network's answer.
 
 ``--release PNG`` draws, instead of the table, the gripper's decision over one held-out
 put-down (``CakeDrake/Skill-v0`` on a generated problem, seed ``--seed``): the head's
@@ -135,6 +135,11 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--each-off", action="store_true", help="a column for each shield step off in turn"
     )
+    ap.add_argument(
+        "--rules", nargs="+", metavar="STEP",
+        help="a column with these shield steps alone (e.g. the ones below the skill's "
+        "decisions: keep_wrist_mid_range limit_finger_speed)",
+    )  # fmt: skip
     ap.add_argument("--dev", action="store_true", help="the development seeds, 100000 and up")
     ap.add_argument("--seed", type=int, default=DEV_SEED, help="--release's put-down")
     args = ap.parse_args(argv)
@@ -147,6 +152,15 @@ def main(argv=None) -> int:
     columns = [("learned skills", args.skills, None)]
     if args.alone:
         columns.append(("the network alone", args.skills, []))
+    if args.rules:
+        from cake_drake.policy.shield import check_names
+
+        try:
+            named = list(check_names(args.rules, "--rules"))
+        except ValueError as e:
+            print(e)
+            return 2
+        columns.append((f"only {' '.join(named)}", args.skills, named))
     if args.each_off:
         columns += [(f"without {n}", args.skills, [m for m in DEFAULT if m != n])
                     for n in DEFAULT]  # fmt: skip

@@ -57,7 +57,10 @@ where the learner did), and fine-tunes the last checkpoint on it for --round-ste
 training keeps its folder in OUT/rounds/round-K. Prints, per round, the episodes, the
 frames added, the expert-labelled frames in all and the learner's success in the round's
 rollouts. OUT changes only when the last round has finished (an error or Ctrl-C in any
-round leaves it as it was). State policies only (--inputs state).
+round leaves it as it was). State policies and skills (--inputs state, skill, relative);
+a skill that never sees the arm (relative) acts as the network alone, with no shield
+step, is trained afresh each round on every frame so far, and OUT is the last round's
+skill (OUT/skill.json and OUT/weights.npz: run it with motion.skills: OUT).
 
 --residual fits the dynamic layer's learned residual instead: DATASET... are run folders
 written with outputs.logs: true (their logs.npz); the residual, tau = tau_IDC + r(q, v,
@@ -290,10 +293,10 @@ def _main_policy(args: argparse.Namespace) -> int:
         recipe = replace(recipe, images=replace(recipe.images, cameras=list(args.cameras)))
     if args.weights is not None and not Path(args.weights).is_file():
         raise InputError(f"--weights {args.weights}: no such file")
-    if recipe.inputs == "relative":
-        return _main_relative(args, recipe)
     if args.dagger is not None:
         return _main_dagger(args, recipe)
+    if recipe.inputs == "relative":
+        return _main_relative(args, recipe)
     folder = train(
         args.dataset, args.out, recipe, args.device, args.seed, args.resume, args.weights
     )
@@ -304,22 +307,27 @@ def _main_policy(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _main_relative(args: argparse.Namespace, recipe) -> int:
-    """A skill that never sees the arm, trained on the recording of the hand's moves."""
-    from cake_drake.learning.skills.train_relative import FILES, train_relative
-    from cake_drake.outputs.files import OutputDir
-
-    unread = [f for f in ("dagger", "resume", "weights", "cameras") if getattr(args, f)]
+def check_relative(args: argparse.Namespace, recipe) -> None:
+    """What a relative skill's training cannot take, refused in one line (exit 2)."""
+    unread = [f for f in ("resume", "weights", "cameras") if getattr(args, f)]
     if recipe.policy != "mlp" or unread:
         what = f"--{unread[0]}" if unread else f"--policy {recipe.policy}"
         raise InputError(f"{what} with --inputs relative: a relative skill is a perceptron "
                          "trained on the CPU from its recording alone")  # fmt: skip
     if args.device not in ("auto", "cpu"):
         raise InputError(f"--device {args.device} with --inputs relative: it trains on the CPU")
+
+
+def _main_relative(args: argparse.Namespace, recipe) -> int:
+    """A skill that never sees the arm, trained on the recording of the hand's moves."""
+    from cake_drake.learning.skills.train_relative import FILES, train_relative
+    from cake_drake.outputs.files import OutputDir
+
+    check_relative(args, recipe)
     with OutputDir(args.out, "train", FILES, [args.dataset]) as staged:
         info = train_relative(
             Path(args.dataset),
-            staged,
+            staged.staging,
             recipe.steps,
             recipe.batch_size,
             recipe.lr or 1e-3,
@@ -501,27 +509,32 @@ def _main_planner_reward(args: argparse.Namespace) -> int:
 
 
 def _main_dagger(args: argparse.Namespace, recipe) -> int:
-    from cake_drake.learning.training.dagger import DAGGER_OUTPUTS, check_rounds, dagger, source
+    from cake_drake.learning.training.dagger import check_rounds, dagger, dagger_outputs, source
     from cake_drake.outputs.files import OutputDir
 
     per_round = EPISODES_PER_ROUND if args.episodes_per_round is None else args.episodes_per_round
     beta = 0.0 if args.beta is None else args.beta
     check_rounds(args.dagger, per_round, beta, args.round_steps)
+    if recipe.inputs == "relative":
+        check_relative(args, recipe)
     source(args.dataset)
     workers = worker_count(args.workers)
     # Every round is written into the staging folder and put in place at the end: an
     # error or Ctrl-C in any round leaves OUT as it was.
-    with OutputDir(args.out, "train --dagger", DAGGER_OUTPUTS, [args.dataset]) as staged:
+    names = dagger_outputs(recipe.inputs)
+    with OutputDir(args.out, "train --dagger", names, [args.dataset]) as staged:
         summary = dagger(
             args.dataset, staged.staging, recipe, args.dagger, per_round, beta, args.device,
             args.seed, workers, ray_engine(args.ray, workers), args.weights, args.round_steps,
             log=lambda line: print(line, flush=True), final=staged.real,
         )  # fmt: skip
         staged.commit()
+    where = (f"run it with motion.skills: {args.out}" if recipe.inputs == "relative"
+             else f"checkpoint {args.out}/checkpoints/last/pretrained_model")  # fmt: skip
     print(
         f"{args.out}: {recipe.policy} ({recipe.inputs}) trained on {args.dataset} and "
         f"{args.dagger} rounds of DAgger ({summary['dagger']['expert_labelled_frames']} "
-        f"expert-labelled frames); checkpoint {args.out}/checkpoints/last/pretrained_model"
+        f"expert-labelled frames); {where}"
     )
     return EXIT_OK
 

@@ -28,7 +28,7 @@ from cake_drake.learning.policies.lerobot_checkpoint import (
 from cake_drake.learning.policies.mlp.acting import load as load_mlp
 from cake_drake.learning.skills import relative as relative_skill
 from cake_drake.pipeline import check, get_plan, run
-from cake_drake.policy.observations import SKILL_SIZE
+from cake_drake.policy.observations import SKILL_SIZE, relative_vector
 from cake_drake.policy.spaces import step_budget
 from cake_drake.scenario import Motion, Planned
 from cake_drake.symbolic.roles import blocksworld_view
@@ -218,22 +218,25 @@ def episode(spec, seed: int) -> dict:
 class SkillsUnderExpert:
     """DAgger's learner for skills: in the Gym env, the closed-loop expert chooses the
     ground action from the measured world (its plan, its repairs) and the skill
-    checkpoint executes it: the states learned skills drift into, for the teacher to
-    label per action (:func:`cake_drake.learning.training.dagger.dagger` with ``--inputs skill``).
-    The skill's history is cleared when the action under way changes, as under the
-    planner (:class:`cake_drake.systems.skills.LearnedSkills`); while no action is under
-    way (waiting for the world to settle) the expert's own answer holds the hand."""
+    executes it: the states learned skills drift into, for the teacher to label per
+    action (:func:`cake_drake.learning.training.dagger.dagger` with ``--inputs skill`` or
+    ``relative``). A skill that never sees the arm acts as the network alone: no shield
+    step runs here. The skill's history is cleared when the action under way changes,
+    as under the planner (:class:`cake_drake.systems.skills.LearnedSkills`); while no
+    action is under way (waiting for the world to settle) the expert's own answer holds
+    the hand."""
 
     def __init__(self, path: str, device: str = "cpu") -> None:
         # Acting as it does under the planner, its chunks ensembled as a run's are.
-        self.skill = CheckpointSkill(path, device, Motion.skill_ensemble)
+        self.skill = make(path, device, Motion.skill_ensemble)
+        self.folder = Path(path)
         self.chooser = ClosedLoopExpert(max_repairs=None)
         self._ground: tuple | None = None
 
     def reset(self, task, seed: int) -> None:
         if task.action_space != self.skill.action_space:
             raise InputError(
-                f"{self.skill.folder}: a skill answering {self.skill.action_space}, rolled "
+                f"{self.folder}: a skill answering {self.skill.action_space}, rolled "
                 f"out in an env of {task.action_space} actions; record the task of its space"
             )
         self.chooser.reset(task, seed)
@@ -256,7 +259,11 @@ class SkillsUnderExpert:
             self._ground = tuple(ground)
             self.skill.reset()
         state = np.asarray(observation["state"][:8], np.float32)
-        return self.skill.act({"observation.state": state, "observation.skill": skill})
+        return self.skill.act({
+            "observation.state": state,
+            "observation.skill": skill,
+            "observation.relative": relative_vector(skill, float(state[7])),
+        })  # fmt: skip
 
 
 def under_expert(path: str, device: str = "cpu") -> SkillsUnderExpert:

@@ -249,7 +249,7 @@ def losses(moves_std, logit, target_std, closed):
 
 def train_relative(
     root: Path,
-    staged,
+    folder: Path,
     steps: int,
     batch_size: int,
     lr: float,
@@ -259,8 +259,8 @@ def train_relative(
     progress=print,
 ) -> dict:
     """Train the skill on the recording at ``root``; its ``skill.json`` and
-    ``weights.npz`` written into ``staged`` (an ``OutputDir``: the caller commits). The
-    summary: frames, minutes, the gripper head's accuracy on the frames."""
+    ``weights.npz`` written into ``folder`` (a staging folder: the caller puts it in
+    place). The summary: frames, minutes, the gripper head's accuracy on the frames."""
     import torch
     from torch import nn
 
@@ -339,6 +339,7 @@ def train_relative(
     for k, m in enumerate(linear):
         arrays[f"w{k}"] = m.weight.detach().numpy().T.astype(np.float64)
         arrays[f"b{k}"] = m.bias.detach().numpy().astype(np.float64)
-    staged.write_text("skill.json", json.dumps(meta, indent=2) + "\n")
-    np.savez_compressed(staged.path("weights.npz"), **arrays)
+    folder = Path(folder)
+    (folder / "skill.json").write_text(json.dumps(meta, indent=2) + "\n")
+    np.savez_compressed(folder / "weights.npz", **arrays)
     return {"frames": len(x), "minutes": minutes, "gripper_accuracy": accuracy}

@@ -19,12 +19,18 @@ cloning, :func:`cake_drake.learning.training.train.train`), then, each round:
    ``OUT/rollouts/``), each frame's ``actor`` saying who acted (0 the expert, 1 the
    learner), its ``action`` always the expert's label;
 4. fine-tunes the last checkpoint on it (lerobot's ``policy.pretrained_path``: the weights
-   carried on, the normalisation from the new dataset), ``round_steps`` steps.
+   carried on, the normalisation from the new dataset), ``round_steps`` steps; a skill
+   that never sees the arm (``--inputs relative``, a perceptron trained in a fraction of
+   a minute) is trained afresh on it instead.
 
+Skills are rolled out under the expert's choice of ground action
+(:class:`cake_drake.learning.skills.checkpoints.SkillsUnderExpert`): the states they
+reach with no shield step around them, which are where the demonstrations lacked.
 Each training has its folder in ``OUT/rounds/round-K`` (round 0: the behaviour cloning);
 the last round's checkpoints are copied to ``OUT/checkpoints``, the usual place, which
-``evaluate``, a run's ``!Policy {checkpoint: OUT}`` and the Gym env load as any training's.
-``OUT/train.json`` keeps the recipe and one row per round.
+``evaluate``, a run's ``!Policy {checkpoint: OUT}`` and the Gym env load as any training's
+(a relative skill: its ``skill.json`` and ``weights.npz`` to ``OUT``, which
+``motion.skills`` names). ``OUT/train.json`` keeps the recipe and one row per round.
 """
 
 from __future__ import annotations
@@ -56,8 +62,15 @@ from cake_drake.learning.training import train as training
 from cake_drake.scenario import CHECKPOINT_POLICY, Training
 from cake_drake.systems.policy_source import make_policy
 
-#: What DAgger writes in its output folder.
+#: What DAgger writes in its output folder: the last round's LeRobot checkpoint, or (a
+#: skill that never sees the arm) its ``skill.json`` and ``weights.npz``.
 DAGGER_OUTPUTS = ("checkpoints", "train.json", "rounds", "data", "rollouts")
+RELATIVE_OUTPUTS = ("skill.json", "weights.npz", "train.json", "rounds", "data", "rollouts")
+
+
+def dagger_outputs(inputs: str) -> tuple[str, ...]:
+    """What DAgger writes for a recipe of these ``inputs``."""
+    return RELATIVE_OUTPUTS if inputs == "relative" else DAGGER_OUTPUTS
 
 
 def check_rounds(rounds: int, per_round: int, beta: float, round_steps: int | None) -> None:
@@ -178,24 +191,31 @@ def dagger(
     root, out = Path(root), Path(out)
     check_rounds(rounds, per_round, beta, round_steps)
     report, spec, demo_files = source(root)
-    training.check(root, out, recipe, device, False)
-    if recipe.inputs not in ("state", "skill"):
+    relative = recipe.inputs == "relative"
+    if relative:
+        from cake_drake.learning.skills.train_relative import read_frames
+
+        read_frames(root)  # the columns a relative skill learns from, each checked
+    else:
+        training.check(root, out, recipe, device, False)
+    if recipe.inputs not in ("state", "skill", "relative"):
         raise InputError(
             f"--dagger with --inputs {recipe.inputs}: DAgger's rollouts record no images; "
-            "train with --inputs state (a whole-task policy) or skill (learned skills)"
+            "train with --inputs state (a whole-task policy), skill or relative (learned "
+            "skills)"
         )
     dataset.require_lerobot()
     teacher = labeller(spec, beta)
-    if recipe.inputs == "skill":
+    skills = recipe.inputs in ("skill", "relative")
+    if skills:
         check_skill_teacher(teacher)
+    fit = _fit_relative if relative else _fit_lerobot
     demo_rows = [_row(f, s) for f, s in zip(demo_files, report["seeds"], strict=True)]
     tried = [int(s) for s in report["seeds"]] + [int(f["seed"]) for f in report.get("failed", [])]
     first = max(tried) + 1
     (out / "rounds").mkdir(parents=True, exist_ok=True)
     (out / "rollouts").mkdir(exist_ok=True)
-    with contextlib.redirect_stdout(sys.stderr):  # lerobot's own lines: not the rounds'
-        checkpoint = training.train(root, out / "rounds" / "round-0", recipe, device, seed,
-                                    weights=weights)  # fmt: skip
+    checkpoint = fit(root, out / "rounds" / "round-0", recipe, device, seed, weights=weights)
     labelled = int(report["frames"])
     log(f"round 0: {recipe.policy} trained {recipe.steps} steps on {len(demo_files)} "
         f"demonstrations ({labelled} expert-labelled frames)")  # fmt: skip
@@ -204,7 +224,7 @@ def dagger(
     for k in range(1, rounds + 1):
         learner = replace(
             spec,
-            policy=SKILL_LEARNER if recipe.inputs == "skill" else CHECKPOINT_POLICY,
+            policy=SKILL_LEARNER if skills else CHECKPOINT_POLICY,
             options={**spec.action_options(), "path": str(checkpoint.resolve()),
                      "device": device},
             cameras=(),
@@ -246,10 +266,8 @@ def dagger(
         }, indent=2) + "\n")  # fmt: skip
         phases["writing"] += time.perf_counter() - t0
         steps = round_steps or recipe.steps
-        with contextlib.redirect_stdout(sys.stderr):
-            checkpoint = training.train(data, out / "rounds" / f"round-{k}",
-                                        replace(recipe, steps=steps), device, seed + k,
-                                        pretrained=checkpoint)  # fmt: skip
+        checkpoint = fit(data, out / "rounds" / f"round-{k}", replace(recipe, steps=steps),
+                         device, seed + k, pretrained=checkpoint)  # fmt: skip
         line = {
             "round": k,
             "episodes": per_round,
@@ -264,9 +282,14 @@ def dagger(
         log(f"round {k}: {per_round} episodes, {added} frames added ({learner_frames} by "
             f"the learner, {added - learner_frames} by the expert), {labelled} "
             f"expert-labelled frames in all; the learner's rollouts reached the goal in "
-            f"{wins}/{per_round} (beta {beta:g}); fine-tuned {steps} steps")  # fmt: skip
-    shutil.copytree(out / "rounds" / f"round-{rounds}" / "checkpoints", out / "checkpoints",
-                    symlinks=True)  # fmt: skip
+            f"{wins}/{per_round} (beta {beta:g}); {'trained afresh' if relative else 'fine-tuned'} "
+            f"{steps} steps")  # fmt: skip
+    last = out / "rounds" / f"round-{rounds}"
+    if relative:
+        for name in ("skill.json", "weights.npz"):
+            shutil.copy2(last / name, out / name)
+    else:
+        shutil.copytree(last / "checkpoints", out / "checkpoints", symlinks=True)
     for k in range(rounds + 1):  # each training's own phases (train.json), added up
         trained = json.loads((out / "rounds" / f"round-{k}" / "train.json").read_text())
         for name, seconds in trained.get("phases_s", {}).items():
@@ -290,6 +313,32 @@ def dagger(
     if final is not None:
         _repoint(out, Path(final))
     return summary
+
+
+def _fit_lerobot(data, folder, recipe, device, seed, weights=None, pretrained=None) -> Path:
+    """A LeRobot policy trained on ``data`` into ``folder`` (fine-tuned from
+    ``pretrained``); its checkpoint."""
+    with contextlib.redirect_stdout(sys.stderr):  # lerobot's own lines: not the rounds'
+        return training.train(data, folder, recipe, device, seed, weights=weights,
+                              pretrained=pretrained)  # fmt: skip
+
+
+def _fit_relative(data, folder, recipe, device, seed, weights=None, pretrained=None) -> Path:
+    """A skill that never sees the arm trained afresh on ``data`` (every frame so far:
+    DAgger's aggregate) into ``folder``, which it is; its training's time is kept in
+    ``folder/train.json`` as a LeRobot training's is."""
+    from cake_drake.learning.skills.train_relative import train_relative
+
+    folder = Path(folder)
+    folder.mkdir(parents=True)
+    info = train_relative(data, folder, recipe.steps, recipe.batch_size, recipe.lr or 1e-3,
+                          list(recipe.hidden_dims), recipe.n_obs_steps, seed,
+                          progress=lambda line: None)  # fmt: skip
+    (folder / "train.json").write_text(
+        json.dumps({"frames": info["frames"], "phases_s": {"training": info["minutes"] * 60}})
+        + "\n"
+    )
+    return folder
 
 
 def _repoint(staging: Path, final: Path) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -264,6 +265,48 @@ def test_dagger_for_skills_labels_each_frame_with_the_action_under_way(hand_skil
     # The checkpoint of the last round is a skill, as any training's.
     config = json.loads((out / "checkpoints/last/pretrained_model/config.json").read_text())
     assert "observation.skill" in config["input_features"]
+
+
+#: docs/learning.md's DAgger for a skill that never sees the arm, run as the page shows it.
+RELATIVE_DAGGER = "python -m cake_drake.train hand_demos --inputs relative --out relative_dagger --steps 30 --batch-size 32 --dagger 1 --episodes-per-round 1 --beta 0.8 --workers 1"  # noqa: E501 - verbatim
+
+
+def test_dagger_for_a_relative_skill_labels_the_network_alone_s_states_and_trains_afresh(
+    hand_skill, tmp_path
+):
+    """--dagger with --inputs relative: the skill that never sees the arm acts with no
+    shield step under the expert's choice of action, the expert labels its frames, and
+    each round trains a skill afresh on every frame so far; OUT is the last round's skill,
+    which a run takes as motion.skills."""
+    (tmp_path / "hand_demos").symlink_to(hand_skill.parent / "ds")
+    out = tmp_path / "relative_dagger"
+    r = subprocess.run(
+        [sys.executable, *shlex.split(RELATIVE_DAGGER)[1:]], cwd=tmp_path, capture_output=True,
+        text=True, timeout=600, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert "round 1: 1 episodes" in r.stdout
+    assert "1 rounds of DAgger" in r.stdout and "motion.skills: relative_dagger" in r.stdout
+    assert "trained afresh 30 steps" in r.stdout
+    assert {p.name for p in out.iterdir() if not p.name.startswith(".")} == {
+        "skill.json", "weights.npz", "train.json", "rounds", "data", "rollouts",
+    }  # fmt: skip
+    summary = json.loads((out / "train.json").read_text())
+    (row,) = summary["dagger"]["rounds"]
+    assert 0 < row["learner_frames"] < row["frames_added"]
+    assert summary["phases_s"]["training"] > 0
+    first = json.loads((out / "rounds" / "round-0" / "skill.json").read_text())
+    last = json.loads((out / "skill.json").read_text())
+    assert last["kind"] == "relative_skill"
+    # Round 1 learned from more frames than the recording alone: the learner's, labelled.
+    assert last["recipe"]["frames"] > first["recipe"]["frames"]
+    assert (out / "weights.npz").read_bytes() == (out / "rounds/round-1/weights.npz").read_bytes()
+    (seed,) = row["seeds"]
+    with np.load(out / "rollouts" / f"ep_{seed}.npz") as z:
+        assert z["actions"].shape[1] == 7 and set(z["actors"].tolist()) == {0, 1}
+    from cake_drake.learning.skills.relative import check_folder
+
+    check_folder(out)
 
 
 def test_dagger_for_skills_with_a_teacher_that_cannot_label_per_action_is_refused(
