@@ -167,6 +167,32 @@ def test_a_cube_no_plan_can_use_ends_the_episode_with_the_reason(xyz, says):
     assert expert.act(obs) == (None, True)  # it stays ended
 
 
+@pytest.mark.slow
+def test_a_hand_held_back_ends_the_expert_but_not_dagger_s_labeller():
+    """A hand that cannot go below 20 cm (as if held back over the tower): the expert
+    gives up after three motions the hand did not follow; DAgger's labeller (no bound on
+    repairs) goes on answering, as a learner in control does not follow its motions."""
+    env = gymnasium.make(ENV_ID, problem=str(PROBLEM_5), control_mode="ee_delta")
+    ends = {}
+    for bound in (20, None):
+        obs, _ = env.reset(seed=0)
+        expert = make(max_repairs=bound)
+        expert.reset(env.unwrapped.policy_task, 0)
+        for step in range(250):
+            answer = expert.act(obs)
+            if isinstance(answer, tuple):
+                break
+            action = np.array(answer)
+            action[2] = max(action[2], 0.2 - expert._measured.X_WG.translation()[2])
+            obs, *_ = env.step(action)
+        stalls = sum("not followed" in e["why"] for e in expert.events)
+        ends[bound] = (step, expert.reason, stalls)
+    step, reason, stalls = ends[20]
+    assert reason == "no motion for (unstack a b): the hand is held back" and step < 200
+    step, reason, stalls = ends[None]
+    assert reason is None and step == 249 and stalls >= 4
+
+
 def _tilted(obs: dict, cubes, cube: str, xyz) -> dict:
     """``obs`` with ``cube`` at ``xyz``, tilted by 45 degrees about world x."""
     tilted = _moved(obs, cube, cubes, xyz)

@@ -195,7 +195,8 @@ class ClosedLoopExpert:
     (scaled with the rate: twice the rate, twice the speed, up to the limits);
     ``max_repairs`` bounds the replans, repeats and dropped motions of one episode (None:
     no bound, as DAgger's labeller: a learner in control drags the hand off every motion,
-    and a teacher that gave up would label none of the states it drifts into)."""
+    and a teacher that gave up would label none of the states it drifts into; nor does
+    it then give up on motions the hand does not follow, ``MAX_STALLS``)."""
 
     slow: float = SLOW_AT_10HZ
     max_repairs: int | None = MAX_REPAIRS
@@ -329,7 +330,7 @@ class ClosedLoopExpert:
             why = self._off(a, m, facts)
             if why is not None:
                 self._stalls = self._stalls + 1 if "not followed" in why else 0
-                if self._stalls >= MAX_STALLS:
+                if self._stalls >= MAX_STALLS and self.max_repairs is not None:
                     return self._end(f"no motion for {a.action}: the hand is held back")
                 self._repair("dropped", why, step)
                 a = self.current = None
