@@ -312,8 +312,11 @@ def check_relative(args: argparse.Namespace, recipe) -> None:
     unread = [f for f in ("resume", "weights", "cameras") if getattr(args, f)]
     if recipe.policy != "mlp" or unread:
         what = f"--{unread[0]}" if unread else f"--policy {recipe.policy}"
+        if not unread and args.policy is None:  # the recipe's: none in report.json says mlp
+            what = (f"policy {recipe.policy} (the recipe of {Path(args.dataset) / 'report.json'}"
+                    ", or the default where it has none)")  # fmt: skip
         raise InputError(f"{what} with --inputs relative: a relative skill is a perceptron "
-                         "trained on the CPU from its recording alone")  # fmt: skip
+                         "trained on the CPU from its recording alone (--policy mlp)")  # fmt: skip
     if args.device not in ("auto", "cpu"):
         raise InputError(f"--device {args.device} with --inputs relative: it trains on the CPU")
 
@@ -515,9 +518,9 @@ def _main_dagger(args: argparse.Namespace, recipe) -> int:
     per_round = EPISODES_PER_ROUND if args.episodes_per_round is None else args.episodes_per_round
     beta = 0.0 if args.beta is None else args.beta
     check_rounds(args.dagger, per_round, beta, args.round_steps)
+    source(args.dataset)  # the task to roll out on, named first where it is missing
     if recipe.inputs == "relative":
         check_relative(args, recipe)
-    source(args.dataset)
     workers = worker_count(args.workers)
     # Every round is written into the staging folder and put in place at the end: an
     # error or Ctrl-C in any round leaves OUT as it was.

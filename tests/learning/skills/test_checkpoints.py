@@ -309,6 +309,26 @@ def test_dagger_for_a_relative_skill_labels_the_network_alone_s_states_and_train
     check_folder(out)
 
 
+def test_a_relative_dagger_that_cannot_work_is_one_line_before_any_rollout(hand_skill, tmp_path):
+    data = tmp_path / "ds"
+    shutil.copytree(hand_skill.parent / "ds", data)
+    base = ("cake_drake.train", str(data), "--inputs", "relative", "--dagger", "1")
+    for flags, words in (
+        (("--policy", "act"), "--policy act with --inputs relative"),
+        (("--device", "cuda"), "--device cuda with --inputs relative: it trains on the CPU"),
+    ):
+        r = cli(*base, *flags, "--out", str(tmp_path / "d"))
+        assert r.returncode == 2 and words in r.stderr, r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "d").exists()
+    (data / "report.json").unlink()
+    r = cli(*base, "--out", str(tmp_path / "d"))
+    assert r.returncode == 2 and "report.json: missing; --dagger rolls" in r.stderr, r.stderr
+    r = cli("cake_drake.train", str(data), "--inputs", "relative", "--out", str(tmp_path / "d"))
+    assert r.returncode == 2, r.stderr
+    assert "policy act (the recipe of" in r.stderr and "(--policy mlp)" in r.stderr
+    assert not (tmp_path / "d").exists()
+
+
 def test_dagger_for_skills_with_a_teacher_that_cannot_label_per_action_is_refused(
     hand_skill, tmp_path
 ):
