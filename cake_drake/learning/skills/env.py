@@ -348,7 +348,8 @@ class SkillEnv(gymnasium.Env):
             if key in self._built:  # most recently used last
                 self._built[key] = self._built.pop(key)
             else:
-                self._build(*key)
+                scenario = self._scenario(*key)
+                self._build(scenario, check(scenario, write=False))
                 self._built[key] = (self._held, self._cake, self._system, self._simulator)
                 while len(self._built) > BUILT:
                     self._built.pop(next(iter(self._built)))
