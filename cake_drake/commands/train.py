@@ -323,22 +323,13 @@ def check_relative(args: argparse.Namespace, recipe) -> None:
 
 def _main_relative(args: argparse.Namespace, recipe) -> int:
     """A skill that never sees the arm, trained on the recording of the hand's moves."""
-    from cake_drake.learning.skills.train_relative import FILES, train_relative
+    from cake_drake.learning.skills.train_relative import FILES, train_recipe
     from cake_drake.outputs.files import OutputDir
 
     check_relative(args, recipe)
     with OutputDir(args.out, "train", FILES, [args.dataset]) as staged:
-        info = train_relative(
-            Path(args.dataset),
-            staged.staging,
-            recipe.steps,
-            recipe.batch_size,
-            recipe.lr or 1e-3,
-            list(recipe.hidden_dims),
-            recipe.n_obs_steps,
-            args.seed,
-            progress=lambda line: print(line, flush=True),
-        )
+        info = train_recipe(Path(args.dataset), staged.staging, recipe, args.seed,
+                            progress=lambda line: print(line, flush=True))  # fmt: skip
         staged.commit()
     print(
         f"{args.out}: relative skill trained {recipe.steps} steps on {info['frames']} frames "

@@ -343,3 +343,10 @@ def train_relative(
     (folder / "skill.json").write_text(json.dumps(meta, indent=2) + "\n")
     np.savez_compressed(folder / "weights.npz", **arrays)
     return {"frames": len(x), "minutes": minutes, "gripper_accuracy": accuracy}
+
+
+def train_recipe(root: Path, folder: Path, recipe, seed: int = 0, progress=print) -> dict:
+    """:func:`train_relative` with a task's recipe (``training:``: steps, batch size,
+    learning rate, layers, observations), as ``train`` and DAgger's rounds call it."""
+    return train_relative(root, folder, recipe.steps, recipe.batch_size, recipe.lr or 1e-3,
+                          list(recipe.hidden_dims), recipe.n_obs_steps, seed, progress)  # fmt: skip

@@ -327,13 +327,11 @@ def _fit_relative(data, folder, recipe, device, seed, weights=None, pretrained=N
     """A skill that never sees the arm trained afresh on ``data`` (every frame so far:
     DAgger's aggregate) into ``folder``, which it is; its training's time is kept in
     ``folder/train.json`` as a LeRobot training's is."""
-    from cake_drake.learning.skills.train_relative import train_relative
+    from cake_drake.learning.skills.train_relative import train_recipe
 
     folder = Path(folder)
     folder.mkdir(parents=True)
-    info = train_relative(data, folder, recipe.steps, recipe.batch_size, recipe.lr or 1e-3,
-                          list(recipe.hidden_dims), recipe.n_obs_steps, seed,
-                          progress=lambda line: None)  # fmt: skip
+    info = train_recipe(data, folder, recipe, seed, progress=lambda line: None)
     (folder / "train.json").write_text(
         json.dumps({"frames": info["frames"], "phases_s": {"training": info["minutes"] * 60}})
         + "\n"
